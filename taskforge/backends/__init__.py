@@ -1,0 +1,33 @@
+"""Simulator backends, one module each, chosen by the `type` of a task's `backend:` block.
+
+Each backend module offers `create(task, file) -> Backend` and `check_task(task, file) ->
+list[SpecIssue]`; it is imported only when a task uses it, so validating a Meta-World task never
+imports another simulator's packages.
+"""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+from types import ModuleType
+
+from taskforge.backends.base import Backend, GoalOverride, Split
+from taskforge.spec import SpecIssue, TaskSpec
+
+_MODULES = {"metaworld": "taskforge.backends.metaworld"}
+
+
+def _module(task: TaskSpec) -> ModuleType:
+    return importlib.import_module(_MODULES[task.backend.type])
+
+
+def make_backend(task: TaskSpec, file: str | Path) -> Backend:
+    return _module(task).create(task, file)
+
+
+def backend_issues(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
+    """Checks that need the backend's simulator package (e.g. known environment names)."""
+    return _module(task).check_task(task, file)
+
+
+__all__ = ["Backend", "GoalOverride", "Split", "backend_issues", "make_backend"]

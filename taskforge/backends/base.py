@@ -1,0 +1,62 @@
+"""What every simulator backend offers the env: reset to a goal, step, and the shared features.
+
+A backend knows nothing about rewards, stages' success or agents (those live in
+`taskforge.terms` and `taskforge.agents`); it only moves the simulator and reads it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import mujoco
+import numpy as np
+from gymnasium.spaces import Box
+
+from taskforge.terms import Features
+
+Split = Literal["train", "test"]
+
+
+@dataclass(frozen=True)
+class GoalOverride:
+    """A stage's reshaping of the goal (see `GoalOverrideSpec`)."""
+
+    height: Literal["keep", "object"] | float = "keep"
+    distance_scale: float = 1.0
+
+    @property
+    def is_identity(self) -> bool:
+        return self.height == "keep" and self.distance_scale == 1.0
+
+
+class Backend(Protocol):
+    task_names: list[str]
+    """Sub-tasks this backend can run (one for a single env, ten for MT10)."""
+    action_space: Box
+    obs_size: int
+    goal_slice: slice
+    """Where the goal sits in the observation; zeroed by the env when the goal is hidden."""
+    dt: float
+    """Seconds of simulated time per control step."""
+
+    def model(self, task_name: str) -> mujoco.MjModel:
+        """The compiled model of a sub-task, for physics randomisation (changed in place)."""
+
+    def object_geoms(self, task_name: str) -> list[str]:
+        """Names of the main object's geoms (the default target of `object_size`)."""
+
+    def num_goals(self, split: Split) -> int:
+        ...
+
+    def reset(self, task_name: str, split: Split, goal_index: int, goal: GoalOverride) -> np.ndarray:
+        """Reset to a goal of a split; returns the observation with the true goal in `goal_slice`."""
+
+    def step(self, action: np.ndarray) -> np.ndarray:
+        ...
+
+    def features(self) -> Features:
+        """The shared features after the last reset/step (`action` and `stage_success` excluded)."""
+
+    def close(self) -> None:
+        ...

@@ -1,0 +1,82 @@
+"""Loading files with *every* check: the schema, then the registries (reward terms, features,
+backend environment names), then the files a curriculum refers to. All mistakes come back
+together as one `SpecError`, one line each."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from taskforge.backends import backend_issues
+from taskforge.spec import (
+    AgentSpec,
+    CurriculumSpec,
+    SpecError,
+    SpecIssue,
+    TaskSpec,
+    expected_one_of,
+    load_agent_spec,
+    load_curriculum_spec,
+    load_task_spec,
+    resolve_relative,
+)
+from taskforge.terms import task_issues
+
+
+def load_task(path: str | Path) -> TaskSpec:
+    task = load_task_spec(path)
+    issues = task_issues(task, path) + backend_issues(task, path)
+    if issues:
+        raise SpecError(issues)
+    return task
+
+
+@dataclass(frozen=True)
+class CurriculumPhase:
+    task_file: Path
+    task: TaskSpec
+    stages: list[str]
+
+
+@dataclass(frozen=True)
+class ResolvedCurriculum:
+    file: Path
+    spec: CurriculumSpec
+    agent_file: Path
+    agent: AgentSpec
+    phases: list[CurriculumPhase]
+
+
+def load_curriculum(path: str | Path) -> ResolvedCurriculum:
+    """A curriculum with its agent preset and task files loaded and cross-checked."""
+    path = Path(path)
+    spec = load_curriculum_spec(path)
+    issues: list[SpecIssue] = []
+    agent_file = resolve_relative(path, spec.agent)
+    agent = _collect(issues, load_agent_spec, agent_file, path, "agent")
+    phases = []
+    for i, phase in enumerate(spec.phases):
+        task_file = resolve_relative(path, phase.task)
+        task = _collect(issues, load_task, task_file, path, f"phases[{i}].task")
+        if task is None:
+            continue
+        for j, stage in enumerate(phase.stages):
+            if stage not in task.stage_names:
+                msg = f"no stage '{stage}' in {task_file}; {expected_one_of(stage, task.stage_names)}"
+                issues.append(SpecIssue(str(path), f"phases[{i}].stages[{j}]", msg))
+        phases.append(CurriculumPhase(task_file, task, list(phase.stages) or task.stage_names))
+    if issues:
+        raise SpecError(issues)
+    return ResolvedCurriculum(path, spec, agent_file, agent, phases)
+
+
+def _collect(issues: list[SpecIssue], loader, file: Path, parent: Path, field: str):
+    """Run `loader(file)`; a missing file is reported at the referring field of `parent`."""
+    if not file.is_file():
+        issues.append(SpecIssue(str(parent), field, f"file not found: {file}"))
+        return None
+    try:
+        return loader(file)
+    except SpecError as exc:
+        issues += exc.issues
+        return None

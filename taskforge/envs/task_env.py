@@ -1,0 +1,184 @@
+"""The Gymnasium env that joins a backend, a stage's reward terms and success condition, and
+the task's randomisation.
+
+Per step: clip action -> action noise -> latency -> backend.step -> features -> success ->
+reward terms -> observation noise -> hide goal. Per reset: choose sub-task and goal from the
+env's seeded generator -> restore+draw physics -> reset noise/latency -> backend.reset.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.spaces import Box
+
+from taskforge.backends import Backend, GoalOverride, Split, make_backend
+from taskforge.randomization import ActionLatency, AdditiveNoise, PhysicsRandomizer
+from taskforge.spec import SpecError, TaskSpec, expected_one_of
+from taskforge.terms import CompiledStage, Features
+
+SPLITS: tuple[Split, ...] = ("train", "test")
+
+
+class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
+    """One task file as a Gymnasium env, running one stage at a time.
+
+    `reset(options={"stage": ..., "task": ..., "goal_index": ...})` switches the stage, the
+    sub-task of a task set, or pins the goal for that episode; this is how a curriculum drives
+    vectorised workers without rebuilding them.
+
+    `info` on every step carries `success` (the stage's condition), `native_success`
+    (Meta-World's own flag), `reward_terms` (each term's unweighted value), `stage`, `task` and
+    `goal_index`; with `privileged=True` also `privileged` (object velocity, true goal and the
+    physics draws), for an asymmetric critic.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": []}
+
+    def __init__(
+        self,
+        task: TaskSpec,
+        file: str | Path = "<task>",
+        stage: str | None = None,
+        split: Split = "train",
+        seed: int | None = None,
+        task_name: str | None = None,
+        privileged: bool = False,
+    ):
+        if split not in SPLITS:
+            raise SpecError.single(file, "split", f"unknown split '{split}'; expected train or test")
+        self.task = task
+        self.file = str(file)
+        self.split: Split = split
+        self.privileged = privileged
+        self.backend: Backend = make_backend(task, file)
+        self.stages = {s.name: CompiledStage(s, file, f"stages[{i}]") for i, s in enumerate(task.stages)}
+        self.stage = self._check_stage(stage or task.stages[0].name)
+        self.task_name = self._check_task_name(task_name)
+        self._randomizers: dict[str, PhysicsRandomizer] = {}
+        for name in self.backend.task_names:
+            self._randomizer(name)  # build all now: bad `names` fail at construction, not mid-run
+
+        rand = task.randomization
+        n_act = self.backend.action_space.shape[0]
+        self._obs_noise = AdditiveNoise(rand.observation_noise, self.backend.obs_size)
+        self._act_noise = AdditiveNoise(rand.action_noise, n_act)
+        self._latency = ActionLatency(rand.action_latency, n_act)
+        self._hide_goal = not task.goals.observable
+
+        self.action_space = Box(-1.0, 1.0, (n_act,), np.float32)
+        self.observation_space = Box(-np.inf, np.inf, (self.backend.obs_size,), np.float32)
+        self._seed = seed
+        self._episode: dict[str, Any] = {}
+        self._t = 0
+
+    # -- configuration ------------------------------------------------------------------------
+
+    def _check_stage(self, stage: str) -> str:
+        if stage not in self.stages:
+            raise SpecError.single(self.file, "stage", f"no stage '{stage}'; {expected_one_of(stage, self.stages)}")
+        return stage
+
+    def _check_task_name(self, name: str | None) -> str | None:
+        if name is not None and name not in self.backend.task_names:
+            msg = f"no sub-task '{name}'; {expected_one_of(name, self.backend.task_names)}"
+            raise SpecError.single(self.file, "task", msg)
+        return name
+
+    def _randomizer(self, task_name: str) -> PhysicsRandomizer:
+        rnd = self._randomizers.get(task_name)
+        if rnd is None:
+            rnd = PhysicsRandomizer(
+                self.backend.model(task_name),
+                self.task.randomization.physics,
+                self.backend.object_geoms(task_name),
+                self.file,
+            )
+            self._randomizers[task_name] = rnd
+        return rnd
+
+    @property
+    def max_episode_steps(self) -> int:
+        return self.stages[self.stage].spec.max_episode_steps or self.task.max_episode_steps
+
+    # -- gymnasium API ------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is None and self._seed is not None:
+            seed, self._seed = self._seed, None  # the constructor's seed seeds the first reset
+        super().reset(seed=seed)
+        options = options or {}
+        if "stage" in options:
+            self.stage = self._check_stage(options["stage"])
+        rng = self.np_random
+        name = self._check_task_name(options.get("task")) or self.task_name
+        if name is None:
+            name = self.backend.task_names[int(rng.integers(len(self.backend.task_names)))]
+        goal_index = options.get("goal_index")
+        if goal_index is None:
+            goal_index = int(rng.integers(self.backend.num_goals(self.split)))
+
+        randomizer = self._randomizer(name)
+        physics_draw = randomizer.apply(rng)
+        self._obs_noise.reset(rng)
+        self._act_noise.reset(rng)
+        self._latency.reset(rng)
+
+        stage = self.stages[self.stage]
+        goal = GoalOverride(stage.spec.goal.height, stage.spec.goal.distance_scale)
+        obs = self.backend.reset(name, self.split, goal_index, goal)
+        self._t = 0
+        self._episode = {"stage": self.stage, "task": name, "goal_index": goal_index}
+        self._physics_draw = physics_draw
+        features = self.backend.features()
+        features["action"] = np.zeros(self.action_space.shape[0])
+        info = self._info(features, stage.success(features), {})
+        return self._observe(obs), info
+
+    def step(self, action: np.ndarray):
+        chosen = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        applied = self._latency(self._act_noise(chosen, self.np_random))
+        obs = self.backend.step(np.clip(applied, -1.0, 1.0))
+        self._t += 1
+
+        features = self.backend.features()
+        features["action"] = chosen
+        stage = self.stages[self.stage]
+        success = stage.success(features)
+        features["stage_success"] = float(success)
+        reward, terms = stage.reward(features)
+
+        terminated = success and stage.spec.terminate_on_success
+        truncated = self._t >= self.max_episode_steps
+        return self._observe(obs), reward, terminated, truncated, self._info(features, success, terms)
+
+    def _observe(self, obs: np.ndarray) -> np.ndarray:
+        obs = self._obs_noise(obs, self.np_random)
+        if self._hide_goal:
+            obs[self.backend.goal_slice] = 0.0
+        return obs.astype(np.float32)
+
+    def _info(self, features: Features, success: bool, terms: dict[str, float]) -> dict[str, Any]:
+        info = {
+            **self._episode,
+            "success": success,
+            "native_success": features["native_success"],
+            "reward_terms": terms,
+        }
+        if self.privileged:
+            info["privileged"] = np.concatenate(
+                [features["object_velocity"], features["goal_pos"], self._physics_draw]
+            ).astype(np.float32)
+        return info
+
+    def features(self) -> Features:
+        """The current features (for scripted policies, tests and debugging)."""
+        return self.backend.features()
+
+    def close(self) -> None:
+        for rnd in self._randomizers.values():
+            rnd.restore()
+        self.backend.close()

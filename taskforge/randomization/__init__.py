@@ -1,0 +1,8 @@
+"""Domain randomisation: distributions, physics parameters of an `MjModel`, observation and
+action noise, and action latency. Everything draws from a generator handed in by the env."""
+
+from taskforge.randomization.distributions import sample
+from taskforge.randomization.noise import ActionLatency, AdditiveNoise
+from taskforge.randomization.physics import PhysicsRandomizer
+
+__all__ = ["ActionLatency", "AdditiveNoise", "PhysicsRandomizer", "sample"]

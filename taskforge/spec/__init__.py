@@ -1,0 +1,56 @@
+"""Schema models of task, agent and curriculum files, and loading them with one-line errors.
+
+This package imports nothing else of taskforge: everything else depends on it.
+"""
+
+from taskforge.spec.agent import AgentSpec, PolicySpec, PPOSpec
+from taskforge.spec.common import Distribution, StrictModel
+from taskforge.spec.curriculum import CurriculumSpec, PhaseSpec
+from taskforge.spec.errors import SpecError, SpecIssue, did_you_mean, expected_one_of, format_path
+from taskforge.spec.loader import (
+    load_agent_spec,
+    load_curriculum_spec,
+    load_task_spec,
+    read_yaml,
+    resolve_relative,
+    validate,
+)
+from taskforge.spec.task import (
+    ConditionSpec,
+    LatencySpec,
+    NoiseSpec,
+    PhysicsTermSpec,
+    RandomizationSpec,
+    RewardTermSpec,
+    StageSpec,
+    TaskSpec,
+)
+
+__all__ = [
+    "AgentSpec",
+    "ConditionSpec",
+    "CurriculumSpec",
+    "Distribution",
+    "LatencySpec",
+    "NoiseSpec",
+    "PPOSpec",
+    "PhaseSpec",
+    "PhysicsTermSpec",
+    "PolicySpec",
+    "RandomizationSpec",
+    "RewardTermSpec",
+    "SpecError",
+    "SpecIssue",
+    "StageSpec",
+    "StrictModel",
+    "TaskSpec",
+    "did_you_mean",
+    "expected_one_of",
+    "format_path",
+    "load_agent_spec",
+    "load_curriculum_spec",
+    "load_task_spec",
+    "read_yaml",
+    "resolve_relative",
+    "validate",
+]

@@ -1,0 +1,76 @@
+"""Schema of a curriculum file: which agent, which (task, stages) in order, and the rules that
+move the agent along them."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field
+
+from taskforge.spec.common import StrictModel
+
+
+class PromotionSpec(StrictModel):
+    """Promote when success over the last `window` episodes of the current stage is at least
+    `threshold` and the stage has run for `min_steps` env steps."""
+
+    threshold: float = Field(default=0.8, ge=0.0, le=1.0)
+    window: int = Field(default=100, ge=1)
+    min_steps: int = Field(default=0, ge=0)
+
+
+class DemotionSpec(StrictModel):
+    """Go back one stage when success collapses below `threshold` over `window` episodes."""
+
+    enabled: bool = False
+    threshold: float = Field(default=0.1, ge=0.0, le=1.0)
+    window: int = Field(default=100, ge=1)
+
+
+class ReplaySpec(StrictModel):
+    """Fraction of episodes spent on already-passed stages, so skills are not forgotten."""
+
+    fraction: float = Field(default=0.1, ge=0.0, lt=1.0)
+
+
+class SamplingSpec(StrictModel):
+    """How sub-tasks of a task set (e.g. MT10) are chosen for each episode."""
+
+    mode: Literal["uniform", "learning_progress"] = "uniform"
+
+
+class EvaluationSpec(StrictModel):
+    every_steps: int = Field(default=100_000, ge=1)
+    episodes: int = Field(default=20, ge=1)
+    split: Literal["train", "test"] = "test"
+
+
+class CheckpointSpec(StrictModel):
+    every_steps: int = Field(default=50_000, ge=1)
+
+
+class PhaseSpec(StrictModel):
+    """One entry of the curriculum: a task file and the stages of it to run, in order."""
+
+    task: str
+    """Path to a task file, relative to the curriculum file."""
+    stages: list[str] = Field(default_factory=list)
+    """Stages in order; empty = every stage of the task, in file order."""
+    promotion: PromotionSpec | None = None
+    """Overrides the curriculum-wide promotion rule for this phase."""
+    sampling: SamplingSpec | None = None
+
+
+class CurriculumSpec(StrictModel):
+    name: str
+    agent: str
+    """Path to an agent preset, relative to the curriculum file."""
+    seed: int = 0
+    total_steps: int = Field(ge=1)
+    phases: list[PhaseSpec] = Field(min_length=1)
+    promotion: PromotionSpec = PromotionSpec()
+    demotion: DemotionSpec = DemotionSpec()
+    replay: ReplaySpec = ReplaySpec()
+    sampling: SamplingSpec = SamplingSpec()
+    evaluation: EvaluationSpec = EvaluationSpec()
+    checkpoint: CheckpointSpec = CheckpointSpec()

@@ -1,0 +1,110 @@
+"""Reading YAML files into schema models, with every mistake reported as file + field path."""
+
+from __future__ import annotations
+
+import types
+import typing
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+from pydantic import BaseModel, ValidationError
+
+from taskforge.spec.agent import AgentSpec
+from taskforge.spec.curriculum import CurriculumSpec
+from taskforge.spec.errors import SpecError, SpecIssue, issues_from_validation
+from taskforge.spec.task import BACKEND_TYPES, TaskSpec
+
+M = TypeVar("M", bound=BaseModel)
+
+
+def read_yaml(path: str | Path) -> dict[str, Any]:
+    """Parse a YAML mapping; a missing file or bad syntax is a `SpecError`, not a traceback."""
+    path = Path(path)
+    if not path.is_file():
+        what = "is a directory" if path.is_dir() else "no such file"
+        raise SpecError.single(path, "", f"{what}; expected a YAML file")
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "?"
+        raise SpecError.single(path, "", f"invalid YAML at {where}: {exc.problem}") from None
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise SpecError.single(path, "", f"invalid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise SpecError.single(path, "", f"expected a mapping at the top level, got {type(data).__name__}")
+    return data
+
+
+def validate(model: type[M], data: dict[str, Any], file: str | Path) -> M:
+    """Validate `data` against `model`; collect every mistake into one `SpecError`."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as exc:
+        issues = issues_from_validation(
+            exc, file, allowed_keys=lambda loc: field_names_at(model, loc), union_tags=BACKEND_TYPES
+        )
+        raise SpecError(issues) from None
+
+
+def load_task_spec(path: str | Path) -> TaskSpec:
+    return validate(TaskSpec, read_yaml(path), path)
+
+
+def load_agent_spec(path: str | Path) -> AgentSpec:
+    return validate(AgentSpec, read_yaml(path), path)
+
+
+def load_curriculum_spec(path: str | Path) -> CurriculumSpec:
+    return validate(CurriculumSpec, read_yaml(path), path)
+
+
+def resolve_relative(base_file: str | Path, ref: str) -> Path:
+    """A path written inside a YAML file is relative to that file, like an `#include`."""
+    ref_path = Path(ref)
+    return ref_path if ref_path.is_absolute() else Path(base_file).parent / ref_path
+
+
+def field_names_at(model: type[BaseModel], loc: tuple[str | int, ...]) -> list[str]:
+    """The keys a user may write at `loc` inside `model` (used for 'did you mean' hints)."""
+    annotation: Any = model
+    for part in loc:
+        annotation = _step(annotation, part)
+        if annotation is None:
+            return []
+    annotation = _unwrap_optional(annotation)
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return list(annotation.model_fields)
+    return []
+
+
+def _step(annotation: Any, part: str | int) -> Any:
+    annotation = _unwrap_optional(annotation)
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        if isinstance(part, str) and part in annotation.model_fields:
+            return annotation.model_fields[part].annotation
+        return annotation if part in BACKEND_TYPES else None
+    origin = typing.get_origin(annotation)
+    args = typing.get_args(annotation)
+    if origin is list and isinstance(part, int):
+        return args[0]
+    if origin is dict:
+        return args[1]
+    return None
+
+
+def _unwrap_optional(annotation: Any) -> Any:
+    """`X | None` and `Annotated[X, ...]` both mean X for key lookup."""
+    while True:
+        origin = typing.get_origin(annotation)
+        if origin is typing.Annotated:
+            annotation = typing.get_args(annotation)[0]
+        elif origin in (typing.Union, types.UnionType):
+            members = [a for a in typing.get_args(annotation) if a is not type(None)]
+            if len(members) != 1:
+                return annotation
+            annotation = members[0]
+        else:
+            return annotation
+

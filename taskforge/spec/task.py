@@ -1,0 +1,216 @@
+"""Schema of a task file: backend + scene, ordered stages, randomisation, goal splits.
+
+Reward-term names, their parameters and feature names are *not* checked here: they live in
+registries (`taskforge.terms`, `taskforge.backends`) that this package may not import. Those
+registries check them in a second pass that reports errors with the same file + field path
+(see `taskforge.envs.resolve`).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import Field, field_validator, model_validator
+
+from taskforge.spec.common import Distribution, Range, StrictModel
+
+Name = Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_\-]+$")]
+
+
+# --- backend -------------------------------------------------------------------------------
+
+
+class MetaWorldBackendSpec(StrictModel):
+    """A Meta-World v3 environment, or a set of them (MT10)."""
+
+    type: Literal["metaworld"]
+    env: str | None = None
+    """One v3 environment name, e.g. `pick-place-v3` (ML1/MT1 style)."""
+    task_set: Literal["mt10"] | None = None
+    """A named set of environments; each keeps its own ML1 train/test goal split."""
+    task_id_in_obs: bool = True
+    """For task sets: append a one-hot of the sub-task to the observation (the MT10 convention)."""
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "MetaWorldBackendSpec":
+        if (self.env is None) == (self.task_set is None):
+            raise ValueError("give exactly one of 'env' (one environment) or 'task_set' (e.g. mt10)")
+        return self
+
+
+BackendSpec = Annotated[MetaWorldBackendSpec, Field(discriminator="type")]
+BACKEND_TYPES = ("metaworld",)
+
+
+# --- stages --------------------------------------------------------------------------------
+
+
+class RewardTermSpec(StrictModel):
+    """One weighted reward term: `weight * term(features, **params)`."""
+
+    term: str
+    weight: float = 1.0
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+class ConditionSpec(StrictModel):
+    """`feature` strictly below and/or above a threshold."""
+
+    feature: str
+    below: float | None = None
+    above: float | None = None
+
+    @model_validator(mode="after")
+    def _has_bound(self) -> "ConditionSpec":
+        if self.below is None and self.above is None:
+            raise ValueError("a condition needs 'below' and/or 'above'")
+        if self.below is not None and self.above is not None and self.above >= self.below:
+            raise ValueError(f"'above' ({self.above}) must be < 'below' ({self.below})")
+        return self
+
+
+class SuccessSpec(StrictModel):
+    """The stage succeeds when every condition in `all` holds."""
+
+    all: list[ConditionSpec] = Field(min_length=1)
+
+
+class GoalOverrideSpec(StrictModel):
+    """How a stage reshapes the goal distribution of its backend.
+
+    `height: object` puts the goal on the table at the object's resting height (a push stage);
+    a number sets the goal height in metres; `keep` leaves it. `distance_scale` moves the goal
+    towards the object's start in the horizontal plane (1 = unchanged, 0 = on the object),
+    a classic way to make the early stages easy.
+    """
+
+    height: Literal["keep", "object"] | float = "keep"
+    distance_scale: float = Field(default=1.0, ge=0.0, le=1.0)
+
+
+class StageSpec(StrictModel):
+    """One stage of the task: its reward terms, its success condition and what it changes."""
+
+    name: Name
+    rewards: list[RewardTermSpec] = Field(min_length=1)
+    success: SuccessSpec
+    max_episode_steps: int | None = Field(default=None, ge=1, le=100_000)
+    terminate_on_success: bool = False
+    goal: GoalOverrideSpec = GoalOverrideSpec()
+
+
+# --- randomisation -------------------------------------------------------------------------
+
+PhysicsTarget = Literal[
+    "body_mass", "geom_friction", "dof_damping", "actuator_gain", "gravity", "object_size"
+]
+
+
+class PhysicsTermSpec(Distribution):
+    """A draw applied to one kind of MuJoCo model parameter at every reset.
+
+    `op: scale` multiplies the nominal value, `add` adds to it. `names` are regular
+    expressions over the element names (bodies, geoms, joints or actuators); empty = all
+    (for `object_size`: the backend's object geoms). `per_element: false` draws one value
+    shared by every matched element.
+    """
+
+    target: PhysicsTarget
+    op: Literal["scale", "add"] = "scale"
+    names: list[str] = Field(default_factory=list)
+    per_element: bool = True
+
+
+class NoiseSpec(StrictModel):
+    """Additive Gaussian-style noise: `per_step` redrawn every step, `per_episode` once per
+    episode (the correlated noise of *Learning Dexterity*)."""
+
+    per_step: Distribution | None = None
+    per_episode: Distribution | None = None
+
+
+class LatencySpec(StrictModel):
+    """The action applied is the one chosen `k` control steps ago, `k ~ U{min_steps..max_steps}`
+    drawn at each reset."""
+
+    min_steps: int = Field(default=0, ge=0, le=50)
+    max_steps: int = Field(default=0, ge=0, le=50)
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "LatencySpec":
+        if self.min_steps > self.max_steps:
+            raise ValueError(f"'min_steps' ({self.min_steps}) must be <= 'max_steps' ({self.max_steps})")
+        return self
+
+
+class RandomizationSpec(StrictModel):
+    physics: list[PhysicsTermSpec] = Field(default_factory=list)
+    observation_noise: NoiseSpec = NoiseSpec()
+    action_noise: NoiseSpec = NoiseSpec()
+    action_latency: LatencySpec = LatencySpec()
+
+
+# --- goals ---------------------------------------------------------------------------------
+
+
+class GoalSplitSpec(StrictModel):
+    """One goal set. For Meta-World these are ML1's tasks (goal + object placement)."""
+
+    count: int = Field(default=50, ge=1, le=50)
+    region: "RegionSpec | None" = None
+
+
+class RegionSpec(StrictModel):
+    """An axis-aligned box of goal positions (metres), for backends that sample goals."""
+
+    x: Range
+    y: Range
+    z: Range
+
+
+class GoalsSpec(StrictModel):
+    """The train and held-out test goal sets, and whether the goal is observed."""
+
+    observable: bool = False
+    """False hides the goal (meta-RL: the agent must infer it); True shows it in the observation."""
+    seed: int = 0
+    """Seed of the goal sets themselves: with the same seed, everyone gets the same goals."""
+    train: GoalSplitSpec = GoalSplitSpec()
+    test: GoalSplitSpec = GoalSplitSpec()
+
+
+GoalSplitSpec.model_rebuild()
+
+
+# --- the task file -------------------------------------------------------------------------
+
+
+class TaskSpec(StrictModel):
+    """A whole task file."""
+
+    name: Name
+    description: str = ""
+    backend: BackendSpec
+    max_episode_steps: int = Field(default=500, ge=1, le=100_000)
+    stages: list[StageSpec] = Field(min_length=1)
+    randomization: RandomizationSpec = RandomizationSpec()
+    goals: GoalsSpec = GoalsSpec()
+
+    @field_validator("stages")
+    @classmethod
+    def _unique_stage_names(cls, stages: list[StageSpec]) -> list[StageSpec]:
+        names = [s.name for s in stages]
+        dupes = sorted({n for n in names if names.count(n) > 1})
+        if dupes:
+            raise ValueError(f"stage names must be unique; repeated: {', '.join(dupes)}")
+        return stages
+
+    def stage(self, name: str) -> StageSpec:
+        for stage in self.stages:
+            if stage.name == name:
+                return stage
+        raise KeyError(name)
+
+    @property
+    def stage_names(self) -> list[str]:
+        return [s.name for s in self.stages]

@@ -1,0 +1,43 @@
+"""The feature names every backend exposes, so reward terms and success conditions can be
+written once and run on any simulator.
+
+A features dict maps these names to floats (scalars) or small float arrays (vectors). Backends
+fill it after each step; the env adds `action` and `stage_success`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Union
+
+import numpy as np
+
+FeatureValue = Union[float, np.ndarray]
+Features = dict[str, FeatureValue]
+
+
+@dataclass(frozen=True)
+class FeatureInfo:
+    size: int
+    """1 for a scalar (a Python float in the dict), else the length of the vector."""
+    doc: str
+
+
+FEATURES: dict[str, FeatureInfo] = {
+    "tcp_pos": FeatureInfo(3, "tool-centre-point position between the fingers (m, world frame)"),
+    "object_pos": FeatureInfo(3, "position of the main object (m)"),
+    "goal_pos": FeatureInfo(3, "position of the goal (m), whether or not the agent observes it"),
+    "gripper_opening": FeatureInfo(1, "0 = fingers closed, 1 = fully open"),
+    "object_grasped": FeatureInfo(1, "1 when both finger pads press on the object, else 0"),
+    "object_height": FeatureInfo(1, "height of the object above where it rested at reset (m)"),
+    "object_to_goal_distance": FeatureInfo(1, "|object_pos - goal_pos| (m)"),
+    "tcp_to_object_distance": FeatureInfo(1, "|tcp_pos - object_pos| (m)"),
+    "tcp_to_goal_distance": FeatureInfo(1, "|tcp_pos - goal_pos| (m)"),
+    "object_velocity": FeatureInfo(3, "linear velocity of the object (m/s); privileged"),
+    "action": FeatureInfo(4, "the action the agent chose this step (before noise and latency)"),
+    "native_reward": FeatureInfo(1, "the simulator suite's own reward (Meta-World's v2 reward)"),
+    "native_success": FeatureInfo(1, "the simulator suite's own success flag (Meta-World's `success`)"),
+    "stage_success": FeatureInfo(1, "1 when the current stage's success condition holds"),
+}
+
+SCALAR_FEATURES = frozenset(name for name, info in FEATURES.items() if info.size == 1)
