@@ -7,6 +7,15 @@ from pathlib import Path
 from taskforge.backends import Split
 from taskforge.envs.resolve import load_task
 from taskforge.envs.task_env import TaskEnv
+from taskforge.spec import TaskSpec
+
+
+def check_task_file(task_file: str | Path) -> TaskSpec:
+    """Every check `make` would do, including those that need the compiled simulator model
+    (randomisation `names` must match bodies, geoms, joints or actuators)."""
+    spec = load_task(task_file)
+    TaskEnv(spec, task_file).close()
+    return spec
 
 
 def make(

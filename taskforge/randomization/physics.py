@@ -186,10 +186,11 @@ def _resolve(
             raise SpecError.single(file, f"{path}.names[{j}]", f"invalid regular expression: {exc}") from None
         hits = [i for i, n in enumerate(names) if n and regex.fullmatch(n)]
         if term.names and not hits:
+            known = ", ".join(n for n in names if n)
+            known = known if len(known) <= 200 else known[:200].rsplit(", ", 1)[0] + ", ..."
             raise SpecError.single(
                 file, f"{path}.names[{j}]",
-                f"'{pattern}' matches no {kind.name[6:].lower()} of the model; names include "
-                f"{', '.join(n for n in names if n)[:200]}",
+                f"'{pattern}' matches no {kind.name[6:].lower()} of the model; names include {known}",
             )
         chosen += [i for i in hits if i not in chosen]
     if term.target == "body_mass":

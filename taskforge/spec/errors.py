@@ -83,26 +83,29 @@ def issues_from_validation(
         # pydantic puts the chosen member of a tagged union into `loc`; users never wrote it.
         raw = tuple(err["loc"])
         loc = [p for p in raw if not (isinstance(p, str) and p in tags)]
-        path = format_path([*prefix, *loc])
         kind = err["type"]
+        ctx = err.get("ctx", {})
+        if kind in ("union_tag_invalid", "union_tag_not_found"):
+            loc.append(str(ctx.get("discriminator", "type")).strip("'"))
+        path = format_path([*prefix, *loc])
         if kind == "extra_forbidden":
             key = str(loc[-1]) if loc else "?"
             names = allowed_keys(raw[:-1]) if allowed_keys else []
             msg = f"unknown field '{key}'; expected one of {', '.join(sorted(names))}{did_you_mean(key, names)}"
         elif kind == "missing":
             msg = "required field is missing"
-        elif kind == "union_tag_invalid":
-            ctx = err.get("ctx", {})
-            tag = str(ctx.get("tag", ""))
-            expected = [t.strip(" '") for t in str(ctx.get("expected_tags", "")).split(",")]
-            msg = f"unknown value '{tag}'; {expected_one_of(tag, expected)}"
         elif kind == "union_tag_not_found":
-            msg = f"missing the '{err.get('ctx', {}).get('discriminator', '').strip(chr(39))}' field that says which kind this is"
+            msg = "required field is missing (it says which kind this is)"
+        elif kind in ("union_tag_invalid", "literal_error"):
+            given = str(ctx.get("tag", err.get("input", "")))
+            raw_expected = str(ctx.get("expected_tags" if kind == "union_tag_invalid" else "expected", ""))
+            expected = [t.strip(" '") for t in raw_expected.replace(" or ", ",").split(",") if t.strip(" '")]
+            msg = f"unknown value '{given}'; {expected_one_of(given, expected)}"
         else:
             msg = err["msg"]
             if msg.startswith("Value error, "):
                 msg = msg[len("Value error, ") :]
-            if "input" in err and kind not in ("model_type", "dict_type"):
+            if "input" in err and not isinstance(err["input"], (dict, list)):
                 msg += f" (got {_short(err['input'])})"
         issues.append(SpecIssue(str(file), path, msg))
     return issues

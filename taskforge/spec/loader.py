@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import types
 import typing
 from pathlib import Path
@@ -63,7 +64,7 @@ def load_curriculum_spec(path: str | Path) -> CurriculumSpec:
 def resolve_relative(base_file: str | Path, ref: str) -> Path:
     """A path written inside a YAML file is relative to that file, like an `#include`."""
     ref_path = Path(ref)
-    return ref_path if ref_path.is_absolute() else Path(base_file).parent / ref_path
+    return ref_path if ref_path.is_absolute() else Path(os.path.normpath(Path(base_file).parent / ref_path))
 
 
 def field_names_at(model: type[BaseModel], loc: tuple[str | int, ...]) -> list[str]:

@@ -1,0 +1,80 @@
+"""Human-readable summaries of validated files (what `taskforge validate` and `tasks` print)."""
+
+from __future__ import annotations
+
+from taskforge.envs import ResolvedCurriculum
+from taskforge.spec import AgentSpec, ConditionSpec, TaskSpec
+
+
+def condition_text(c: ConditionSpec) -> str:
+    parts = []
+    if c.above is not None:
+        parts.append(f"{c.feature} > {c.above:g}")
+    if c.below is not None:
+        parts.append(f"{c.feature} < {c.below:g}")
+    return " and ".join(parts)
+
+
+def task_summary(task: TaskSpec) -> list[str]:
+    b = task.backend
+    source = b.env if b.env else f"task set {b.task_set}"
+    lines = [
+        f"task {task.name}: backend {b.type}, {source}, episodes of {task.max_episode_steps} steps",
+        f"  goals: {'observable' if task.goals.observable else 'hidden'}, seed {task.goals.seed}, "
+        f"train {task.goals.train.count}, test (held out) {task.goals.test.count}",
+        f"  stages ({len(task.stages)}):",
+    ]
+    for i, stage in enumerate(task.stages):
+        terms = ", ".join(f"{r.weight:+g}*{r.term}" for r in stage.rewards)
+        extras = []
+        if stage.max_episode_steps:
+            extras.append(f"{stage.max_episode_steps} steps")
+        if stage.goal.height != "keep" or stage.goal.distance_scale != 1.0:
+            extras.append(f"goal height={stage.goal.height}, distance x{stage.goal.distance_scale:g}")
+        if stage.terminate_on_success:
+            extras.append("ends on success")
+        tail = f" [{'; '.join(extras)}]" if extras else ""
+        lines.append(f"    {i + 1}. {stage.name}{tail}")
+        lines.append(f"       reward  = {terms}")
+        lines.append(f"       success = {' and '.join(condition_text(c) for c in stage.success.all)}")
+    rand = task.randomization
+    if rand.physics:
+        lines.append("  physics randomisation:")
+        for p in rand.physics:
+            names = f" on {', '.join(p.names)}" if p.names else ""
+            lines.append(f"    {p.target}: {p.op} by {p.describe()}{names}{'' if p.per_element else ' (shared draw)'}")
+    for label, noise in (("observation noise", rand.observation_noise), ("action noise", rand.action_noise)):
+        parts = [f"{k} {d.describe()}" for k, d in (("per step", noise.per_step), ("per episode", noise.per_episode)) if d]
+        if parts:
+            lines.append(f"  {label}: {', '.join(parts)}")
+    lat = rand.action_latency
+    if lat.max_steps:
+        lines.append(f"  action latency: {lat.min_steps}..{lat.max_steps} steps")
+    return lines
+
+
+def agent_summary(agent: AgentSpec) -> list[str]:
+    p, ppo = agent.policy, agent.ppo
+    return [
+        f"agent {agent.name}: {agent.algo}, {p.type} policy {p.hidden_sizes} ({p.activation}), "
+        f"actions {p.action_bounds}{', asymmetric critic' if agent.asymmetric_critic else ''}",
+        f"  {ppo.num_envs} envs x {ppo.rollout_steps} steps per update, {ppo.update_epochs} epochs x "
+        f"{ppo.num_minibatches} minibatches, lr {ppo.learning_rate:g}, gamma {ppo.gamma:g}, lambda {ppo.gae_lambda:g}",
+    ]
+
+
+def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
+    spec = cur.spec
+    lines = [
+        f"curriculum {spec.name}: {spec.total_steps:,} steps, seed {spec.seed}, agent {cur.agent.name} ({cur.agent_file})",
+        f"  promote at success >= {spec.promotion.threshold:g} over {spec.promotion.window} episodes "
+        f"(min {spec.promotion.min_steps:,} steps); replay {spec.replay.fraction:g}; "
+        f"demotion {'on' if spec.demotion.enabled else 'off'}; sub-task sampling {spec.sampling.mode}",
+    ]
+    for i, phase in enumerate(cur.phases):
+        lines.append(f"  phase {i + 1}: {phase.task.name} ({phase.task_file}): {' -> '.join(phase.stages)}")
+    lines.append(
+        f"  evaluate every {spec.evaluation.every_steps:,} steps on {spec.evaluation.episodes} "
+        f"{spec.evaluation.split} episodes; checkpoint every {spec.checkpoint.every_steps:,} steps"
+    )
+    return lines
