@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import pytest
@@ -11,9 +10,6 @@ ROOT = Path(__file__).resolve().parents[1]
 TASKS = ROOT / "tasks"
 PICK_PLACE = TASKS / "metaworld" / "pick_place.yaml"
 
-# Gymnasium's checker warns that an unbounded Box is "probably too low/high"; ours is unbounded
-# on purpose (observation noise may leave any finite box).
-warnings.filterwarnings("ignore", message=".*Box observation space (minimum|maximum) value is.*")
 
 
 @pytest.fixture(scope="session")

@@ -112,7 +112,8 @@ def _combine(nominal: np.ndarray, value: np.ndarray, op: str) -> np.ndarray:
 
 def _apply_body_mass(model: mujoco.MjModel, idx: np.ndarray, value: np.ndarray, op: str) -> None:
     old = model.body_mass[idx].copy()
-    new = np.maximum(_combine(old, value, op), 1e-6)
+    # A body must keep a positive mass; a draw may not take it below a thousandth of nominal.
+    new = np.maximum(_combine(old, value, op), old * 1e-3)
     model.body_mass[idx] = new
     # Inertia scales with mass for a fixed shape; keeps the model physically consistent.
     model.body_inertia[idx] *= (new / np.where(old > 0, old, 1.0))[:, None]
@@ -177,8 +178,14 @@ def _resolve(
         "actuator_gain": model.nu, "object_size": model.ngeom,
     }[term.target]
     names = [mujoco.mj_id2name(model, kind, i) or "" for i in range(count)]
-    patterns = term.names or (list(map(re.escape, object_geoms)) if term.target == "object_size" else [".*"])
-    chosen: list[int] = []
+    if term.target == "object_size" and not term.names:
+        patterns = [re.escape(g) for g in object_geoms]
+    else:
+        patterns = term.names
+    if not patterns and term.target != "object_size":
+        chosen = list(range(count))  # no names: every element, named or not
+    else:
+        chosen = []
     for j, pattern in enumerate(patterns):
         try:
             regex = re.compile(pattern)

@@ -1,0 +1,46 @@
+"""taskforge's own PPO (torch), with CleanRL's fidelity and no knowledge of the simulator.
+
+It imports only torch, numpy, gymnasium and `taskforge.spec`. A trainer builds the vector env
+with `make_vector_env` (SAME_STEP autoreset, needed for time-limit bootstrapping) and drives a
+`PPOAgent`:
+
+    set_torch_threads(spec.runtime)
+    envs = make_vector_env(env_fns, spec.runtime)
+    agent = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    while agent.global_step < budget:
+        agent.set_progress(agent.global_step / budget)
+        agent.collect(envs, on_step=log_episodes)
+        metrics = agent.update()
+
+Modules, in reading order: `gae` (advantages), `normalization` (observation and reward
+statistics), `actions` (clip vs squash), `policies` (MLP / LSTM actor-critic), `storage` (rollout
+buffer and minibatches), `ppo` (the agent and the loss), `runtime` (vector env, threads).
+"""
+
+from taskforge.agents.actions import ClipGaussian, SquashGaussian
+from taskforge.agents.gae import compute_gae
+from taskforge.agents.normalization import ObservationNormalizer, RewardScaler, RunningMeanStd
+from taskforge.agents.policies import ActorCritic, RecurrentState
+from taskforge.agents.ppo import PPOAgent, PPOLoss, explained_variance, ppo_loss
+from taskforge.agents.runtime import check_same_step_autoreset, make_vector_env, set_torch_threads
+from taskforge.agents.storage import Minibatch, RolloutBuffer
+
+__all__ = [
+    "ActorCritic",
+    "ClipGaussian",
+    "Minibatch",
+    "ObservationNormalizer",
+    "PPOAgent",
+    "PPOLoss",
+    "RecurrentState",
+    "RewardScaler",
+    "RolloutBuffer",
+    "RunningMeanStd",
+    "SquashGaussian",
+    "check_same_step_autoreset",
+    "compute_gae",
+    "explained_variance",
+    "make_vector_env",
+    "ppo_loss",
+    "set_torch_threads",
+]

@@ -1,0 +1,385 @@
+"""PPO (Schulman et al., 2017) for continuous actions, after CleanRL's `ppo_continuous_action.py`
+and, for the recurrent policy, `ppo_atari_lstm.py`.
+
+"detail #k" comments name the implementation details of Huang et al. (2022), "The 37
+Implementation Details of Proximal Policy Optimization": plain numbers are the 13 core details,
+"continuous detail #k" and "LSTM detail #k" the sections of those names.
+
+Differences from CleanRL, all deliberate:
+* time-limit truncation is bootstrapped from V(final observation) instead of treated as
+  terminal (see `gae.py`); this needs SAME_STEP autoreset (see `runtime.make_vector_env`);
+* the caller owns the step budget, so learning-rate annealing follows `set_progress()`;
+* observation/reward normalisation live in the agent, not in env wrappers, so their statistics
+  are saved with the networks and frozen for evaluation;
+* an optional asymmetric critic reads `concat(obs, info["privileged"])`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import gymnasium
+import numpy as np
+import torch
+from gymnasium.vector import VectorEnv
+from torch import nn
+
+from taskforge.agents.normalization import ObservationNormalizer, RewardScaler
+from taskforge.agents.policies import ActorCritic, RecurrentState
+from taskforge.agents.runtime import check_same_step_autoreset
+from taskforge.agents.storage import Minibatch, RolloutBuffer
+from taskforge.spec.agent import AgentSpec, PPOSpec
+
+OnStep = Callable[[np.ndarray, np.ndarray, np.ndarray, dict], None]
+
+
+@dataclass(frozen=True)
+class PPOLoss:
+    """The loss of one minibatch (`total` carries the graph) and its detached parts."""
+
+    total: torch.Tensor
+    policy_loss: float
+    value_loss: float
+    entropy: float
+    approx_kl: float
+    old_approx_kl: float
+    clipfrac: float
+
+
+def ppo_loss(policy: ActorCritic, mb: Minibatch, ppo: PPOSpec, generator: torch.Generator) -> PPOLoss:
+    """PPO's objective on one minibatch, as in CleanRL's inner loop."""
+    newlogprob, entropy, newvalue = policy.evaluate(
+        mb.obs, mb.critic_obs, mb.actions, mb.state, mb.episode_starts, generator
+    )
+    logratio = newlogprob - mb.logprobs
+    ratio = logratio.exp()
+
+    with torch.no_grad():  # debug variables (detail #12); approx_kl is the k3 estimator of KL(old, new)
+        old_approx_kl = (-logratio).mean()
+        approx_kl = ((ratio - 1.0) - logratio).mean()
+        clipfrac = ((ratio - 1.0).abs() > ppo.clip_coef).float().mean()
+
+    advantages = mb.advantages
+    if ppo.norm_adv:  # advantage normalisation, per minibatch (detail #7)
+        advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
+
+    # clipped surrogate objective (detail #8)
+    pg_loss1 = -advantages * ratio
+    pg_loss2 = -advantages * torch.clamp(ratio, 1.0 - ppo.clip_coef, 1.0 + ppo.clip_coef)
+    pg_loss = torch.max(pg_loss1, pg_loss2).mean()
+
+    if ppo.clip_vloss:  # clipped value loss (detail #9)
+        v_loss_unclipped = (newvalue - mb.returns) ** 2
+        v_clipped = mb.values + torch.clamp(newvalue - mb.values, -ppo.clip_coef, ppo.clip_coef)
+        v_loss_clipped = (v_clipped - mb.returns) ** 2
+        v_loss = 0.5 * torch.max(v_loss_unclipped, v_loss_clipped).mean()
+    else:
+        v_loss = 0.5 * ((newvalue - mb.returns) ** 2).mean()
+
+    entropy_loss = entropy.mean()
+    loss = pg_loss - ppo.ent_coef * entropy_loss + ppo.vf_coef * v_loss  # overall loss with entropy bonus (detail #10)
+    return PPOLoss(
+        total=loss,
+        policy_loss=pg_loss.item(),
+        value_loss=v_loss.item(),
+        entropy=entropy_loss.item(),
+        approx_kl=approx_kl.item(),
+        old_approx_kl=old_approx_kl.item(),
+        clipfrac=clipfrac.item(),
+    )
+
+
+def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
+    """`1 - Var[returns - values] / Var[returns]`: 1 is a perfect critic, <= 0 no better than a
+    constant (NaN when the returns do not vary)."""
+    var_returns = returns.var()
+    return float("nan") if var_returns == 0 else (1.0 - (returns - values).var() / var_returns).item()
+
+
+class PPOAgent:
+    """A PPO learner that a trainer drives with `collect()` / `update()` / `set_progress()`.
+
+    It never sees which simulator it trains on: any gymnasium `VectorEnv` with a flat `Box`
+    observation and action space, built with SAME_STEP autoreset (`make_vector_env`). With
+    `spec.asymmetric_critic`, every env must put a float vector of length `privileged_dim` in
+    `info["privileged"]` on reset and on every step; the critic reads `concat(obs, privileged)`
+    and the actor `obs` only. With a symmetric spec, `privileged_dim` is ignored.
+
+    Seeding: network init, action sampling and minibatch shuffles draw from generators seeded
+    by `seed` (never torch's global RNG), and the first `collect()` resets the envs with `seed`,
+    so the same seed gives the same run (at a fixed `torch.set_num_threads`).
+    """
+
+    def __init__(
+        self,
+        spec: AgentSpec,
+        obs_space: gymnasium.spaces.Box,
+        action_space: gymnasium.spaces.Box,
+        privileged_dim: int = 0,
+        seed: int = 0,
+    ) -> None:
+        for name, space in (("observation", obs_space), ("action", action_space)):
+            if not isinstance(space, gymnasium.spaces.Box) or len(space.shape) != 1:
+                raise ValueError(f"PPOAgent needs a flat Box {name} space, got {space}")
+        if spec.asymmetric_critic and privileged_dim < 1:
+            raise ValueError("asymmetric_critic is set, so PPOAgent needs privileged_dim >= 1 (the length of info['privileged'])")
+        ppo = spec.ppo
+        if spec.policy.type == "lstm" and ppo.num_minibatches > ppo.num_envs:
+            raise ValueError(
+                f"an LSTM policy trains on whole env sequences, so num_minibatches ({ppo.num_minibatches}) "
+                f"must be <= num_envs ({ppo.num_envs})"
+            )
+        self.spec = spec
+        self.seed = seed
+        self.action_space = action_space
+        self.privileged_dim = privileged_dim if spec.asymmetric_critic else 0
+        obs_dim = obs_space.shape[0]
+        critic_dim = obs_dim + self.privileged_dim
+
+        with torch.random.fork_rng(devices=[]):  # seeded init without disturbing the caller's global RNG
+            torch.manual_seed(seed)
+            self.policy = ActorCritic(spec.policy, obs_dim, critic_dim, action_space)
+        self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=ppo.learning_rate, eps=1e-5)  # detail #3
+        self.generator = torch.Generator().manual_seed(seed)
+        self.obs_normalizer = ObservationNormalizer(obs_dim, ppo.norm_obs)
+        self.privileged_normalizer = ObservationNormalizer(self.privileged_dim, ppo.norm_obs and self.privileged_dim > 0)
+        self.reward_scaler = RewardScaler(ppo.num_envs, ppo.gamma, ppo.norm_reward)
+        self.buffer = RolloutBuffer(ppo.rollout_steps, ppo.num_envs, obs_dim, critic_dim, action_space.shape[0])
+
+        self.global_step = 0
+        self.num_updates = 0
+        self.progress = 0.0
+        self._env_resets = 0
+        self._rollout_ready = False
+        self._all_envs = np.arange(ppo.num_envs)
+        # Carried between collect() calls: last (normalised) obs, whether it starts an episode, recurrent state.
+        self._obs: torch.Tensor | None = None
+        self._critic_obs: torch.Tensor | None = None
+        self._episode_starts: torch.Tensor | None = None
+        self._state: RecurrentState | None = None
+
+    # ----------------------------------------------------------------------------------- rollout
+
+    def collect(self, envs: VectorEnv, on_step: OnStep | None = None) -> None:
+        """Run `spec.ppo.rollout_steps` steps in every env into the rollout buffer.
+
+        After each vector step, `on_step(rewards, terminated, truncated, infos)` gets the env's raw
+        outputs (unscaled rewards; `infos["final_info"]` for episodes that ended) so the caller can
+        log episodes or feed a curriculum. The last observation, episode-start flags and recurrent
+        state carry over to the next call; the first call (and the first after `reset_envs()`)
+        resets the envs with a seed derived from the agent's.
+        """
+        check_same_step_autoreset(envs)
+        ppo = self.spec.ppo
+        if envs.num_envs != ppo.num_envs:
+            raise ValueError(f"the vector env has {envs.num_envs} envs but spec.ppo.num_envs is {ppo.num_envs}")
+        if self._obs is None:
+            self._reset(envs)
+        obs, critic_obs, episode_starts, state = self._obs, self._critic_obs, self._episode_starts, self._state
+        self.buffer.initial_state = state  # the update re-runs sequences from here (LSTM detail #5)
+
+        for t in range(ppo.rollout_steps):
+            with torch.no_grad():
+                raw_action, logprob, value, state = self.policy.step(
+                    obs[None], critic_obs[None], state, episode_starts[None], self.generator
+                )
+            # the env gets the clipped/squashed action, the buffer keeps the raw sample (continuous detail #5)
+            env_action = self._to_env(raw_action[0])
+            next_obs, reward, terminated, truncated, infos = envs.step(env_action)
+            self.global_step += envs.num_envs
+            if on_step is not None:
+                on_step(reward, terminated, truncated, infos)
+
+            self.buffer.store(
+                t,
+                obs=obs,
+                critic_obs=critic_obs,
+                episode_starts=episode_starts,
+                actions=raw_action[0],
+                logprobs=logprob[0],
+                values=value[0],
+                rewards=self.reward_scaler(reward, terminated, truncated),  # reward scaling + clipping (continuous #8, #9)
+                terminated=torch.as_tensor(terminated),
+                truncated=torch.as_tensor(truncated),
+                final_values=self._truncation_values(infos, truncated & ~terminated, state),
+            )
+            obs, critic_obs = self._observe(next_obs, self._privileged(infos, self._all_envs), update=True)
+            episode_starts = torch.as_tensor(terminated | truncated)
+
+        with torch.no_grad():  # bootstrap the unfinished episodes from the observation after the rollout
+            last_values, _ = self.policy.value(critic_obs[None], state, episode_starts[None])
+        self.buffer.compute_advantages(last_values[0], ppo.gamma, ppo.gae_lambda)
+        self._obs, self._critic_obs, self._episode_starts, self._state = obs, critic_obs, episode_starts, state
+        self._rollout_ready = True
+
+    def _reset(self, envs: VectorEnv) -> None:
+        # gymnasium seeds env i with seed + i; later resets move past the seeds already used
+        obs, infos = envs.reset(seed=self.seed + self._env_resets * envs.num_envs)
+        self._env_resets += 1
+        self.reward_scaler.reset()
+        self._obs, self._critic_obs = self._observe(obs, self._privileged(infos, self._all_envs), update=True)
+        self._episode_starts = torch.ones(envs.num_envs, dtype=torch.bool)
+        self._state = self.policy.initial_state(envs.num_envs)
+
+    def _observe(self, obs: np.ndarray, privileged: np.ndarray, update: bool) -> tuple[torch.Tensor, torch.Tensor]:
+        """Normalised actor input and critic input (`concat(obs, privileged)`)."""
+        obs_n = self.obs_normalizer(obs, update)  # observation normalisation + clipping (continuous #6, #7)
+        return obs_n, torch.cat([obs_n, self.privileged_normalizer(privileged, update)], dim=-1)
+
+    def _privileged(self, infos: dict, rows: np.ndarray) -> np.ndarray:
+        """`infos["privileged"]` of the envs `rows`, `[len(rows), privileged_dim]` (width 0 for a
+        symmetric critic)."""
+        if self.privileged_dim == 0:
+            return np.zeros((len(rows), 0), dtype=np.float32)
+        if "privileged" not in infos or not infos["_privileged"][rows].all():
+            raise KeyError("asymmetric_critic: every env must put info['privileged'] in its reset and step infos")
+        privileged = np.asarray(infos["privileged"][rows], dtype=np.float32)
+        if privileged.shape[1:] != (self.privileged_dim,):
+            raise ValueError(f"info['privileged'] has shape {privileged.shape[1:]}, expected ({self.privileged_dim},)")
+        return privileged
+
+    def _truncation_values(
+        self, infos: dict, truncated: np.ndarray, state: RecurrentState | None
+    ) -> torch.Tensor:
+        """V(final observation) of the envs whose episode was truncated at this step, 0 elsewhere.
+
+        Under SAME_STEP autoreset the step already returned the next episode's first observation;
+        the truncated episode's last one is in `infos["final_obs"]` (its privileged vector in
+        `infos["final_info"]`). The final observation is normalised with frozen statistics and
+        fed to the critic with the state reached after this step, not reset.
+        """
+        final_values = torch.zeros(len(truncated))
+        if not truncated.any():
+            return final_values
+        idx = np.flatnonzero(truncated)
+        final_obs = np.stack(infos["final_obs"][idx])
+        final_privileged = self._privileged(infos["final_info"], idx)
+        _, critic_obs = self._observe(final_obs, final_privileged, update=False)
+        env_idx = torch.as_tensor(idx)
+        with torch.no_grad():
+            values, _ = self.policy.value(
+                critic_obs[None],
+                None if state is None else state.select(env_idx),
+                torch.zeros((1, len(idx)), dtype=torch.bool),
+            )
+        final_values[env_idx] = values[0]
+        return final_values
+
+    def _to_env(self, raw: torch.Tensor) -> np.ndarray:
+        return self.policy.actions.to_env(raw).numpy().astype(self.action_space.dtype)
+
+    # ------------------------------------------------------------------------------------ update
+
+    def update(self) -> dict[str, float]:
+        """PPO epochs over the last rollout; returns the mean of each loss statistic over the
+        minibatches run, plus `explained_variance`, `learning_rate` and `epochs`."""
+        if not self._rollout_ready:
+            raise RuntimeError("update() needs a fresh rollout: call collect() first")
+        ppo = self.spec.ppo
+        totals: dict[str, float] = {}
+        minibatches_run = 0
+        epochs = 0
+        for epochs in range(1, ppo.update_epochs + 1):
+            for mb in self.buffer.minibatches(ppo.num_minibatches, self.generator, self.policy.recurrent):
+                loss = ppo_loss(self.policy, mb, ppo, self.generator)
+                self.optimizer.zero_grad()
+                loss.total.backward()
+                nn.utils.clip_grad_norm_(self.policy.parameters(), ppo.max_grad_norm)  # global gradient clipping (detail #11)
+                self.optimizer.step()
+                for name in ("policy_loss", "value_loss", "entropy", "approx_kl", "old_approx_kl", "clipfrac"):
+                    totals[name] = totals.get(name, 0.0) + getattr(loss, name)
+                minibatches_run += 1
+            if ppo.target_kl is not None and loss.approx_kl > ppo.target_kl:  # early stop on KL, per epoch (as CleanRL)
+                break
+
+        self.num_updates += 1
+        self._rollout_ready = False
+        metrics = {name: total / minibatches_run for name, total in totals.items()}
+        metrics["explained_variance"] = explained_variance(self.buffer.values, self.buffer.returns)
+        metrics["learning_rate"] = self.optimizer.param_groups[0]["lr"]
+        metrics["epochs"] = float(epochs)
+        return metrics
+
+    def set_progress(self, fraction: float) -> None:
+        """Tell the agent how much of the training budget is spent (0..1); with `anneal_lr` the
+        learning rate decays linearly to 0 at 1 (detail #4). The caller owns the budget, which
+        a curriculum may stretch, so the agent cannot compute this itself."""
+        self.progress = min(max(float(fraction), 0.0), 1.0)
+        ppo = self.spec.ppo
+        lr = ppo.learning_rate * (1.0 - self.progress) if ppo.anneal_lr else ppo.learning_rate
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
+
+    # -------------------------------------------------------------------------------- evaluation
+
+    def initial_state(self, num_envs: int) -> RecurrentState | None:
+        """Recurrent state for `act()` on `num_envs` envs (None for an MLP policy)."""
+        return self.policy.initial_state(num_envs)
+
+    def act(
+        self,
+        obs: np.ndarray,
+        state: RecurrentState | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = True,
+    ) -> tuple[np.ndarray, RecurrentState | None]:
+        """Env-ready actions for a batch `[n, obs_dim]` (or one observation `[obs_dim]`).
+
+        Observations are normalised with frozen statistics. For an LSTM policy pass back the
+        returned state each step and `episode_start[i] = True` on the first step of an episode
+        in env i (its state is then zeroed); `state=None` starts from `initial_state(n)`.
+        """
+        obs = np.asarray(obs)
+        batch = np.atleast_2d(obs)
+        if state is None:
+            state = self.policy.initial_state(len(batch))
+        starts = (
+            torch.zeros(len(batch), dtype=torch.bool)
+            if episode_start is None
+            else torch.as_tensor(np.atleast_1d(episode_start), dtype=torch.bool)
+        )
+        with torch.no_grad():
+            obs_n = self.obs_normalizer(batch, update=False)
+            action, state = self.policy.act(obs_n[None], state, starts[None], deterministic, self.generator)
+        env_action = action[0].numpy().astype(self.action_space.dtype)
+        return (env_action[0] if obs.ndim == 1 else env_action), state
+
+    def reset_envs(self) -> None:
+        """Forget the carried observation, so the next `collect()` resets the (rebuilt) envs."""
+        self._obs = self._critic_obs = self._episode_starts = None
+        self._state = None
+        self._rollout_ready = False
+
+    # ---------------------------------------------------------------------------- checkpointing
+
+    def state_dict(self) -> dict:
+        """Everything needed to resume learning exactly: networks, optimizer, normaliser
+        statistics, the RNG and counters. Only tensors and plain Python values, so it loads with
+        `torch.load(weights_only=True)`. The episodes in flight are not saved (the envs are not
+        the agent's): after loading, the next `collect()` resets the envs."""
+        return {
+            "policy": self.policy.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "obs_normalizer": self.obs_normalizer.rms.state_dict(),
+            "privileged_normalizer": self.privileged_normalizer.rms.state_dict(),
+            "reward_scaler": self.reward_scaler.rms.state_dict(),
+            "generator": self.generator.get_state(),
+            "global_step": self.global_step,
+            "num_updates": self.num_updates,
+            "progress": self.progress,
+            "env_resets": self._env_resets,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.policy.load_state_dict(state["policy"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.obs_normalizer.rms.load_state_dict(state["obs_normalizer"])
+        self.privileged_normalizer.rms.load_state_dict(state["privileged_normalizer"])
+        self.reward_scaler.rms.load_state_dict(state["reward_scaler"])
+        self.generator.set_state(state["generator"])
+        self.global_step = state["global_step"]
+        self.num_updates = state["num_updates"]
+        self.progress = state["progress"]
+        self._env_resets = state["env_resets"]
+        self.reset_envs()

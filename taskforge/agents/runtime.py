@@ -1,0 +1,41 @@
+"""Vector envs the agent can train on, and torch's thread count, from `AgentSpec.runtime`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import gymnasium
+import torch
+from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv, VectorEnv
+
+from taskforge.spec.agent import RuntimeSpec
+
+
+def make_vector_env(env_fns: Sequence[Callable[[], gymnasium.Env]], runtime: RuntimeSpec) -> VectorEnv:
+    """A gymnasium vector env (core detail #1) with SAME_STEP autoreset, which `PPOAgent.collect`
+    requires.
+
+    SAME_STEP resets a finished env inside the step that ended it: the step returns the new
+    episode's first observation and puts the last one in `infos["final_obs"]` (its info in
+    `infos["final_info"]`), which is exactly what truncation bootstrapping needs. NEXT_STEP
+    instead spends an extra step with a dummy action and reward 0 on the reset.
+    """
+    vector_cls = AsyncVectorEnv if runtime.vector == "async" else SyncVectorEnv
+    return vector_cls(env_fns, autoreset_mode=AutoresetMode.SAME_STEP)
+
+
+def check_same_step_autoreset(envs: VectorEnv) -> None:
+    """Raise unless `envs` resets finished episodes in the same step (see `make_vector_env`)."""
+    mode = envs.metadata.get("autoreset_mode")
+    if mode != AutoresetMode.SAME_STEP:
+        raise ValueError(
+            f"PPOAgent needs a vector env with autoreset_mode=AutoresetMode.SAME_STEP (got {mode!r}): "
+            "it bootstraps truncated episodes from infos['final_obs']. "
+            "Build it with taskforge.agents.make_vector_env."
+        )
+
+
+def set_torch_threads(runtime: RuntimeSpec) -> None:
+    """`torch.set_num_threads(runtime.torch_threads)`: small networks run fastest on one or two
+    threads, and envs in other processes need the remaining cores."""
+    torch.set_num_threads(runtime.torch_threads)

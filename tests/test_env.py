@@ -1,0 +1,176 @@
+"""The Gymnasium env on the real Meta-World simulator."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import yaml
+from gymnasium.utils.env_checker import check_env
+
+import taskforge
+from taskforge import SpecError
+from taskforge.envs import TaskEnv
+from taskforge.spec import TaskSpec
+from tests.conftest import PICK_PLACE, TASKS
+
+STAGES = ["reach", "push", "pick", "place"]
+
+
+@pytest.fixture(scope="module")
+def pick_place_doc() -> dict:
+    return yaml.safe_load(PICK_PLACE.read_text())
+
+
+def env_from(doc: dict, **kwargs) -> TaskEnv:
+    return TaskEnv(TaskSpec.model_validate(doc), "test.yaml", **kwargs)
+
+
+@pytest.mark.parametrize("stage", STAGES)
+def test_check_env_passes_for_each_stage(stage):
+    env = taskforge.make(PICK_PLACE, stage=stage, seed=0)
+    check_env(env, skip_render_check=True)
+    env.close()
+
+
+def test_info_carries_stage_success_terms_and_native_success():
+    env = taskforge.make(PICK_PLACE, stage="place", seed=0)
+    env.reset()
+    _, reward, _, _, info = env.step(env.action_space.sample())
+    assert set(info["reward_terms"]) == {"tcp_to_object", "grasp", "lift", "object_to_goal", "stage_success", "action_l2"}
+    weights = {r.term: r.weight for r in env.task.stage("place").rewards}
+    assert reward == pytest.approx(sum(weights[k] * v for k, v in info["reward_terms"].items()))
+    assert info["success"] in (True, False) and info["native_success"] in (0.0, 1.0)
+    assert info["stage"] == "place" and info["task"] == "pick-place-v3"
+
+
+def test_same_seed_same_trajectory_and_different_seed_differs():
+    def rollout(seed: int) -> np.ndarray:
+        env = taskforge.make(PICK_PLACE, stage="pick", seed=seed)
+        env.action_space.seed(seed)
+        obs = [env.reset()[0]]
+        for _ in range(20):
+            obs.append(env.step(env.action_space.sample())[0])
+        return np.array(obs)
+
+    a, b, c = rollout(3), rollout(3), rollout(4)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_hidden_and_observable_goal_differ_only_in_goal_slice(pick_place_doc):
+    observable = copy.deepcopy(pick_place_doc)
+    observable["goals"]["observable"] = True
+    envs = [env_from(pick_place_doc, stage="pick", seed=5), env_from(observable, stage="pick", seed=5)]
+    obs = [e.reset()[0] for e in envs]
+    action = np.array([0.3, -0.2, 0.1, 0.5], dtype=np.float32)
+    for _ in range(5):
+        obs = [e.step(action)[0] for e in envs]
+    goal = envs[0].backend.goal_slice
+    hidden, shown = obs
+    np.testing.assert_array_equal(np.delete(hidden, np.r_[goal]), np.delete(shown, np.r_[goal]))
+    assert np.all(hidden[goal] == 0.0)
+    true_goal = envs[1].features()["goal_pos"]
+    assert np.abs(shown[goal] - true_goal).max() < 0.02  # the goal, plus observation noise
+
+
+def test_reach_stage_success_flips_when_the_gripper_reaches_the_object(pick_place_doc):
+    doc = copy.deepcopy(pick_place_doc)
+    doc.pop("randomization")
+    env = env_from(doc, stage="reach", seed=0)
+    env.reset()
+    successes = []
+    for _ in range(120):
+        f = env.features()
+        action = np.append(np.clip((f["object_pos"] - f["tcp_pos"]) * 20.0, -1, 1), -1.0)
+        _, _, _, _, info = env.step(action)
+        successes.append(info["success"])
+        if info["success"]:
+            break
+    assert not successes[0]
+    assert successes[-1], "a proportional controller should reach the puck"
+    assert env.features()["tcp_to_object_distance"] < 0.03
+
+
+def test_push_stage_moves_goal_to_the_table_and_closer(pick_place_doc):
+    env = taskforge.make(PICK_PLACE, stage="push", seed=2)
+    env.reset(options={"goal_index": 4})
+    f_push = env.features()
+    env.reset(options={"stage": "place", "goal_index": 4})
+    f_place = env.features()
+    rest = f_push["object_pos"]
+    assert f_push["goal_pos"][2] == pytest.approx(rest[2], abs=1e-6)
+    d_push = np.linalg.norm(f_push["goal_pos"][:2] - rest[:2])
+    d_place = np.linalg.norm(f_place["goal_pos"][:2] - f_place["object_pos"][:2])
+    assert d_push == pytest.approx(0.5 * d_place, rel=1e-6)
+
+
+def test_test_split_uses_held_out_goals():
+    def goals(split: str) -> set[tuple]:
+        env = taskforge.make(PICK_PLACE, stage="place", split=split, seed=0)
+        out = set()
+        for i in range(5):
+            env.reset(options={"goal_index": i})
+            out.add(tuple(np.round(env.features()["goal_pos"], 6)))
+        return out
+
+    assert goals("train").isdisjoint(goals("test"))
+
+
+def test_episode_length_follows_the_stage():
+    env = taskforge.make(PICK_PLACE, stage="reach", seed=0)
+    env.reset()
+    steps, truncated = 0, False
+    while not truncated:
+        *_, truncated, _ = env.step(np.zeros(4, dtype=np.float32))
+        steps += 1
+    assert steps == 150
+
+
+def test_privileged_info_has_velocity_goal_and_physics_draws():
+    env = taskforge.make(PICK_PLACE, stage="pick", seed=0, privileged=True)
+    _, info = env.reset()
+    n_draws = env._randomizer("pick-place-v3").draw_size
+    assert info["privileged"].shape == (3 + 3 + n_draws,) and n_draws > 10
+
+
+def test_mt10_task_set_appends_one_hot_and_can_pin_a_sub_task():
+    env = taskforge.make(TASKS / "metaworld/mt10.yaml", seed=0, task="reach-v3")
+    obs, info = env.reset()
+    names = env.backend.task_names
+    assert len(names) == 10 and obs.shape == (39 + 10,)
+    assert obs[39 + names.index("reach-v3")] == 1.0 and obs[39:].sum() == 1.0
+    assert info["task"] == "reach-v3"
+    check_env(env, skip_render_check=True)
+
+
+def test_bad_stage_or_split_is_a_spec_error():
+    with pytest.raises(SpecError, match="no stage 'pik'.*did you mean 'pick'"):
+        taskforge.make(PICK_PLACE, stage="pik")
+    with pytest.raises(SpecError, match="unknown split"):
+        taskforge.make(PICK_PLACE, split="validation")
+
+
+def test_scripted_pick_place_grasps_lifts_and_places(pick_place_doc):
+    """Meta-World's own scripted policy, run through our env: `object_grasped` agrees with
+    Meta-World's contact test on every step, and pick then place success flip on."""
+    from metaworld.policies.sawyer_pick_place_v3_policy import SawyerPickPlaceV3Policy
+
+    doc = copy.deepcopy(pick_place_doc)
+    doc["goals"]["observable"] = True  # the scripted policy reads the goal from the observation
+    doc.pop("randomization")
+    env = env_from(doc, stage="place", seed=1)
+    policy = SawyerPickPlaceV3Policy()
+    pick = env.stages["pick"]
+    obs, _ = env.reset()
+    picked = placed = False
+    for _ in range(300):
+        obs, _, _, _, info = env.step(policy.get_action(obs.astype(np.float64)))
+        f = env.features()
+        assert f["object_grasped"] == float(env.backend._active.touching_main_object)
+        picked |= pick.success(f)
+        if info["success"]:
+            placed = True
+            break
+    assert picked and placed and info["native_success"] == 1.0
