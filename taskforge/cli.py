@@ -66,7 +66,7 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     files = sorted(p for p in root.rglob("*.yaml") if "stages" in read_yaml(p))
     for path in files:
         task = load_task_spec(path)
-        source = task.backend.env or task.backend.task_set
+        source = getattr(task.backend, "task_set", None) or task.backend.env
         print(f"{path}  [{task.backend.type}: {source}]  {' -> '.join(task.stage_names)}")
     return 0
 

@@ -17,11 +17,11 @@ def condition_text(c: ConditionSpec) -> str:
 
 def task_summary(task: TaskSpec) -> list[str]:
     b = task.backend
-    source = b.env if b.env else f"task set {b.task_set}"
+    source = getattr(b, "task_set", None) and f"task set {b.task_set}" or b.env
+    goals = "reset seeds" if b.type == "gymnasium" else f"goals {'observable' if task.goals.observable else 'hidden'}, seed {task.goals.seed},"
     lines = [
         f"task {task.name}: backend {b.type}, {source}, episodes of {task.max_episode_steps} steps",
-        f"  goals: {'observable' if task.goals.observable else 'hidden'}, seed {task.goals.seed}, "
-        f"train {task.goals.train.count}, test (held out) {task.goals.test.count}",
+        f"  {goals} train {task.goals.train.count}, test (held out) {task.goals.test.count}",
         f"  stages ({len(task.stages)}):",
     ]
     for i, stage in enumerate(task.stages):

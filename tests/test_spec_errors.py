@@ -59,7 +59,10 @@ CATALOGUE = [
     ("unknown-backend", _set(["backend", "type"], "metawrld"), "backend.type", "did you mean 'metaworld'"),
     ("missing-stages", _delete(["stages"]), "stages", "required field is missing"),
     ("duplicate-stage", _set(["stages", 1, "name"], "reach"), "stages", "repeated: reach"),
-    ("goal-count-too-large", _set(["goals", "test", "count"], 500), "goals.test.count", "less than or equal to 50"),
+    ("goal-count-too-large", _set(["goals", "test", "count"], 500), "goals.test.count", "ML1 has 50 goals per split"),
+    ("term-needs-missing-feature", lambda d: d.update(
+        backend={"type": "gymnasium", "env": "Pendulum-v1"}, randomization={},
+        stages=[{**d["stages"][0], "success": {"all": [{"feature": "native_return", "above": 0}]}}]), "stages[0].rewards[0].term", "reads tcp_to_object_distance, which the gymnasium backend does not provide"),
     ("latency-reversed", _set(["randomization", "action_latency"], {"min_steps": 3, "max_steps": 1}), "randomization.action_latency", "'min_steps' (3) must be <= 'max_steps' (1)"),
     ("distance-scale-range", _set(["stages", 1, "goal", "distance_scale"], 1.5), "stages[1].goal.distance_scale", "less than or equal to 1"),
     ("unmatched-body-name", _set(["randomization", "physics", 0, "names"], ["no_such_body"]), "randomization.physics[0].names[0]", "matches no body"),

@@ -27,7 +27,7 @@ def test_pick_place_summary_names_every_stage_term_and_range(capsys, monkeypatch
     out = capsys.readouterr().out
     for text in ("backend metaworld", "pick-place-v3", "1. reach", "2. push", "3. pick", "4. place",
                  "+1*tcp_to_object", "object_to_goal_distance < 0.07", "body_mass: scale by uniform[0.5, 1.5]",
-                 "dof_damping: scale by loguniform[0.3, 3]", "gravity: add by N(0, 0.4)", "test (held out) 50"):
+                 "dof_damping: scale by loguniform[0.3, 3]", "gravity: add by N(0, 0.4)", "goals hidden", "test (held out) 50"):
         assert text in out, text
 
 

@@ -147,7 +147,7 @@ class ActorCritic(nn.Module):
     ) -> tuple[Normal, LSTMHidden | None]:
         features, actor_state = self.actor(obs, None if state is None else state.actor, episode_starts)
         mean = self.actor_mean(features)
-        return Normal(mean, self.actor_logstd.exp().expand_as(mean)), actor_state
+        return Normal(mean, self.actor_logstd.exp().expand_as(mean), validate_args=False), actor_state
 
     def value(
         self, critic_obs: torch.Tensor, state: RecurrentState | None, episode_starts: torch.Tensor

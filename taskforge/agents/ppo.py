@@ -140,7 +140,7 @@ class PPOAgent:
         with torch.random.fork_rng(devices=[]):  # seeded init without disturbing the caller's global RNG
             torch.manual_seed(seed)
             self.policy = ActorCritic(spec.policy, obs_dim, critic_dim, action_space)
-        self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=ppo.learning_rate, eps=1e-5)  # detail #3
+        self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=ppo.learning_rate, eps=1e-5, foreach=True)  # detail #3
         self.generator = torch.Generator().manual_seed(seed)
         self.obs_normalizer = ObservationNormalizer(obs_dim, ppo.norm_obs)
         self.privileged_normalizer = ObservationNormalizer(self.privileged_dim, ppo.norm_obs and self.privileged_dim > 0)

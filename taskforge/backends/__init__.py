@@ -1,7 +1,7 @@
 """Simulator backends, one module each, chosen by the `type` of a task's `backend:` block.
 
-Each backend module offers `create(task, file) -> Backend` and `check_task(task, file) ->
-list[SpecIssue]`; it is imported only when a task uses it, so validating a Meta-World task never
+Each backend module offers `create(task, file) -> Backend`, `check_task(task, file) ->
+list[SpecIssue]` and `PROVIDES` (the feature names it fills); it is imported only when a task uses it, so validating a Meta-World task never
 imports another simulator's packages.
 """
 
@@ -14,7 +14,7 @@ from types import ModuleType
 from taskforge.backends.base import Backend, GoalOverride, Split
 from taskforge.spec import SpecIssue, TaskSpec
 
-_MODULES = {"metaworld": "taskforge.backends.metaworld"}
+_MODULES = {"metaworld": "taskforge.backends.metaworld", "gymnasium": "taskforge.backends.gymnasium_env"}
 
 
 def _module(task: TaskSpec) -> ModuleType:
@@ -30,4 +30,8 @@ def backend_issues(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
     return _module(task).check_task(task, file)
 
 
-__all__ = ["Backend", "GoalOverride", "Split", "backend_issues", "make_backend"]
+def backend_features(task: TaskSpec) -> frozenset[str]:
+    return _module(task).PROVIDES
+
+
+__all__ = ["Backend", "GoalOverride", "Split", "backend_features", "backend_issues", "make_backend"]

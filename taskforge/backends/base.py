@@ -31,6 +31,8 @@ class GoalOverride:
 
 
 class Backend(Protocol):
+    provides: frozenset[str]
+    """Feature names this backend fills (checked against what a task's terms read)."""
     task_names: list[str]
     """Sub-tasks this backend can run (one for a single env, ten for MT10)."""
     action_space: Box
@@ -40,8 +42,9 @@ class Backend(Protocol):
     dt: float
     """Seconds of simulated time per control step."""
 
-    def model(self, task_name: str) -> mujoco.MjModel:
-        """The compiled model of a sub-task, for physics randomisation (changed in place)."""
+    def model(self, task_name: str) -> mujoco.MjModel | None:
+        """The compiled MuJoCo model of a sub-task, for physics randomisation (changed in
+        place); None for simulators that are not MuJoCo."""
 
     def object_geoms(self, task_name: str) -> list[str]:
         """Names of the main object's geoms (the default target of `object_size`)."""
@@ -52,8 +55,9 @@ class Backend(Protocol):
     def reset(self, task_name: str, split: Split, goal_index: int, goal: GoalOverride) -> np.ndarray:
         """Reset to a goal of a split; returns the observation with the true goal in `goal_slice`."""
 
-    def step(self, action: np.ndarray) -> np.ndarray:
-        ...
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, bool]:
+        """Apply one control step; returns the observation and whether the simulated episode
+        ended on its own (a crash or landing; Meta-World never ends)."""
 
     def features(self) -> Features:
         """The shared features after the last reset/step (`action` and `stage_success` excluded)."""

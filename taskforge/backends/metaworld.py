@@ -24,9 +24,11 @@ from metaworld.types import Task
 from taskforge.backends.base import GoalOverride, Split
 from taskforge.spec import SpecError, SpecIssue, TaskSpec, expected_one_of
 from taskforge.spec.task import GoalsSpec, MetaWorldBackendSpec
-from taskforge.terms import Features
+from taskforge.terms import ENV_FEATURES, FEATURES, Features
 
 TASK_SETS: dict[str, list[str]] = {"mt10": list(MT10_V3)}
+PROVIDES = frozenset(FEATURES) - ENV_FEATURES
+ML1_GOALS = 50  # tasks per split that metaworld.ML1 generates
 _OBS_SIZE = 39
 _GOAL = slice(36, 39)
 _NEVER = 10**9  # Meta-World's own path limit, disabled: the env owns episode length per stage.
@@ -40,6 +42,8 @@ def ml1_goals(env_name: str, seed: int) -> tuple[tuple[Task, ...], tuple[Task, .
 
 
 class MetaWorldBackend:
+    provides = PROVIDES
+
     def __init__(self, spec: MetaWorldBackendSpec, goals: GoalsSpec):
         self.task_names = [spec.env] if spec.env else TASK_SETS[spec.task_set]
         self._goals = goals
@@ -101,20 +105,21 @@ class MetaWorldBackend:
             _override_goal(env, rest, goal)
         self._obs = obs
         self._prev_obj = rest
-        self._native_reward, self._native_success = 0.0, 0.0
+        self._native_reward, self._native_success, self._native_return = 0.0, 0.0, 0.0
         self._grasp_ids = _grasp_geoms(env)
         # Site ids of the two fingertips; their midpoint is Meta-World's `tcp_center`.
         self._tip_sites = [env.data.site(n).id for n in ("rightEndEffector", "leftEndEffector")]
         return self._observation(obs)
 
-    def step(self, action: np.ndarray) -> np.ndarray:
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, bool]:
         env = self._active
         self._prev_obj = self._obs[4:7]
         obs, reward, _, _, info = env.step(action)
         self._obs = obs
         self._native_reward = float(reward)
+        self._native_return += self._native_reward
         self._native_success = float(info["success"])
-        return self._observation(obs)
+        return self._observation(obs), False
 
     def _observation(self, obs: np.ndarray) -> np.ndarray:
         # Meta-World clips the goal to its goal box; write the true (possibly overridden) goal.
@@ -149,6 +154,7 @@ class MetaWorldBackend:
             "object_velocity": (obj - self._prev_obj) / self.dt,
             "native_reward": self._native_reward,
             "native_success": self._native_success,
+            "native_return": self._native_return,
         }
 
     def close(self) -> None:
@@ -160,10 +166,16 @@ class MetaWorldBackend:
 def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
     """Backend fields the schema cannot check without importing Meta-World."""
     spec = task.backend
+    issues = []
     if spec.env is not None and spec.env not in ALL_V3_ENVIRONMENTS:
         msg = f"unknown Meta-World v3 environment '{spec.env}'; {expected_one_of(spec.env, ALL_V3_ENVIRONMENTS)}"
-        return [SpecIssue(str(file), "backend.env", msg)]
-    return []
+        issues.append(SpecIssue(str(file), "backend.env", msg))
+    for split in ("train", "test"):
+        count = getattr(task.goals, split).count
+        if count > ML1_GOALS:
+            msg = f"Meta-World's ML1 has {ML1_GOALS} goals per split; expected at most {ML1_GOALS} (got {count})"
+            issues.append(SpecIssue(str(file), f"goals.{split}.count", msg))
+    return issues
 
 
 def create(task: TaskSpec, file: str | Path) -> MetaWorldBackend:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from taskforge.backends import backend_issues
+from taskforge.backends import backend_features, backend_issues
 from taskforge.spec import (
     AgentSpec,
     CurriculumSpec,
@@ -25,7 +25,9 @@ from taskforge.terms import task_issues
 
 def load_task(path: str | Path) -> TaskSpec:
     task = load_task_spec(path)
-    issues = task_issues(task, path) + backend_issues(task, path)
+    issues = backend_issues(task, path)
+    if not issues:
+        issues = task_issues(task, path, backend_features(task))
     if issues:
         raise SpecError(issues)
     return task

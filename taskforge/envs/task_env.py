@@ -30,7 +30,11 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     sub-task of a task set, or pins the goal for that episode; this is how a curriculum drives
     vectorised workers without rebuilding them.
 
-    `info` on every step carries `success` (the stage's condition), `native_success`
+    A vectorised trainer cannot pass options through autoreset, so it sets `next_episode`
+    (e.g. with `VectorEnv.set_attr`) to the options the *next* reset without options should use.
+
+    `info` on every step carries `success` (the stage's condition this step), `episode_success`
+    (it held at some step of this episode: Meta-World's convention), `native_success`
     (Meta-World's own flag), `reward_terms` (each term's unweighted value), `stage`, `task` and
     `goal_index`; with `privileged=True` also `privileged` (object velocity, true goal and the
     physics draws), for an asymmetric critic.
@@ -72,8 +76,10 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self.action_space = Box(-1.0, 1.0, (n_act,), np.float32)
         self.observation_space = Box(-np.inf, np.inf, (self.backend.obs_size,), np.float32)
         self._seed = seed
+        self.next_episode: dict[str, Any] | None = None
         self._episode: dict[str, Any] = {}
         self._t = 0
+        self._ever_success = False
 
     # -- configuration ------------------------------------------------------------------------
 
@@ -88,11 +94,16 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             raise SpecError.single(self.file, "task", msg)
         return name
 
-    def _randomizer(self, task_name: str) -> PhysicsRandomizer:
+    def _randomizer(self, task_name: str) -> PhysicsRandomizer | None:
+        """The sub-task's physics randomiser; None for backends without a MuJoCo model (their
+        check rejects physics terms)."""
+        model = self.backend.model(task_name)
+        if model is None:
+            return None
         rnd = self._randomizers.get(task_name)
         if rnd is None:
             rnd = PhysicsRandomizer(
-                self.backend.model(task_name),
+                model,
                 self.task.randomization.physics,
                 self.backend.object_geoms(task_name),
                 self.file,
@@ -110,7 +121,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         if seed is None and self._seed is not None:
             seed, self._seed = self._seed, None  # the constructor's seed seeds the first reset
         super().reset(seed=seed)
-        options = options or {}
+        options = options or self.next_episode or {}
         if "stage" in options:
             self.stage = self._check_stage(options["stage"])
         rng = self.np_random
@@ -122,7 +133,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             goal_index = int(rng.integers(self.backend.num_goals(self.split)))
 
         randomizer = self._randomizer(name)
-        physics_draw = randomizer.apply(rng)
+        physics_draw = randomizer.apply(rng) if randomizer else np.zeros(0)
         self._obs_noise.reset(rng)
         self._act_noise.reset(rng)
         self._latency.reset(rng)
@@ -132,6 +143,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         obs = self.backend.reset(name, self.split, goal_index, goal)
         self._t = 0
         self._episode = {"stage": self.stage, "task": name, "goal_index": goal_index}
+        self._ever_success = False
         self._physics_draw = physics_draw
         features = self.backend.features()
         features["action"] = np.zeros(self.action_space.shape[0])
@@ -141,17 +153,18 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     def step(self, action: np.ndarray):
         chosen = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
         applied = self._latency(self._act_noise(chosen, self.np_random))
-        obs = self.backend.step(np.clip(applied, -1.0, 1.0))
+        obs, ended = self.backend.step(np.clip(applied, -1.0, 1.0))
         self._t += 1
 
         features = self.backend.features()
         features["action"] = chosen
         stage = self.stages[self.stage]
         success = stage.success(features)
+        self._ever_success |= success
         features["stage_success"] = float(success)
         reward, terms = stage.reward(features)
 
-        terminated = success and stage.spec.terminate_on_success
+        terminated = ended or (success and stage.spec.terminate_on_success)
         truncated = self._t >= self.max_episode_steps
         return self._observe(obs), reward, terminated, truncated, self._info(features, success, terms)
 
@@ -165,6 +178,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         info = {
             **self._episode,
             "success": success,
+            "episode_success": self._ever_success,
             "native_success": features["native_success"],
             "reward_terms": terms,
         }

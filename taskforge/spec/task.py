@@ -38,8 +38,18 @@ class MetaWorldBackendSpec(StrictModel):
         return self
 
 
-BackendSpec = Annotated[MetaWorldBackendSpec, Field(discriminator="type")]
-BACKEND_TYPES = ("metaworld",)
+class GymnasiumBackendSpec(StrictModel):
+    """Any registered Gymnasium env with a Box action space (e.g. LunarLanderContinuous-v3), as a
+    sanity check that the agent learns outside robotics. Its 'goals' are reset seeds."""
+
+    type: Literal["gymnasium"]
+    env: str
+    kwargs: dict[str, Any] = Field(default_factory=dict)
+    """Keyword arguments for `gymnasium.make`."""
+
+
+BackendSpec = Annotated[MetaWorldBackendSpec | GymnasiumBackendSpec, Field(discriminator="type")]
+BACKEND_TYPES = ("metaworld", "gymnasium")
 
 
 # --- stages --------------------------------------------------------------------------------
@@ -154,9 +164,10 @@ class RandomizationSpec(StrictModel):
 
 
 class GoalSplitSpec(StrictModel):
-    """One goal set. For Meta-World these are ML1's tasks (goal + object placement)."""
+    """One goal set. For Meta-World these are ML1's tasks (goal + object placement, at most 50);
+    for Gymnasium envs, reset seeds."""
 
-    count: int = Field(default=50, ge=1, le=50)
+    count: int = Field(default=50, ge=1, le=1_000_000)
     region: "RegionSpec | None" = None
 
 

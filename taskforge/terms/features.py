@@ -37,7 +37,10 @@ FEATURES: dict[str, FeatureInfo] = {
     "action": FeatureInfo(4, "the action the agent chose this step (before noise and latency)"),
     "native_reward": FeatureInfo(1, "the simulator suite's own reward (Meta-World's v2 reward)"),
     "native_success": FeatureInfo(1, "the simulator suite's own success flag (Meta-World's `success`)"),
+    "native_return": FeatureInfo(1, "sum of `native_reward` so far this episode (e.g. LunarLander 'solved' at 200)"),
     "stage_success": FeatureInfo(1, "1 when the current stage's success condition holds"),
 }
 
+ENV_FEATURES = frozenset({"action", "stage_success"})
+"""Filled by the env itself on every backend."""
 SCALAR_FEATURES = frozenset(name for name, info in FEATURES.items() if info.size == 1)

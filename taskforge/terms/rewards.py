@@ -1,7 +1,7 @@
 """The reward-term registry: every term is a small pure function of the features dict.
 
 Adding a term is one function plus its name here (and a YAML line that uses it): decorate it
-with `@reward_term("name", params=SomeParams)`. `params` is a schema model, so a task file's
+with `@reward_term("name", reads=("feature", ...), params=SomeParams)`. `params` is a schema model, so a task file's
 `params:` block is validated with the same one-line errors as the rest of the file.
 """
 
@@ -42,19 +42,23 @@ class RewardTerm:
     name: str
     fn: TermFn
     params: type[StrictModel]
+    reads: tuple[str, ...]
+    """Features the term reads; a task is rejected if its backend does not provide them."""
     doc: str
 
 
 REWARD_TERMS: dict[str, RewardTerm] = {}
 
 
-def reward_term(name: str, params: type[StrictModel] = NoParams) -> Callable[[TermFn], TermFn]:
+def reward_term(
+    name: str, reads: tuple[str, ...], params: type[StrictModel] = NoParams
+) -> Callable[[TermFn], TermFn]:
     """Register `fn` under `name`; its docstring becomes the term's documentation."""
 
     def register(fn: TermFn) -> TermFn:
         if name in REWARD_TERMS:
             raise ValueError(f"reward term {name!r} registered twice")
-        REWARD_TERMS[name] = RewardTerm(name, fn, params, (fn.__doc__ or "").strip())
+        REWARD_TERMS[name] = RewardTerm(name, fn, params, reads, (fn.__doc__ or "").strip())
         return fn
 
     return register
@@ -68,38 +72,41 @@ def _distance_term(feature: str) -> TermFn:
     return term
 
 
-reward_term("tcp_to_object", DistanceParams)(_distance_term("tcp_to_object_distance"))
-reward_term("object_to_goal", DistanceParams)(_distance_term("object_to_goal_distance"))
-reward_term("tcp_to_goal", DistanceParams)(_distance_term("tcp_to_goal_distance"))
+for _name, _feature in (
+    ("tcp_to_object", "tcp_to_object_distance"),
+    ("object_to_goal", "object_to_goal_distance"),
+    ("tcp_to_goal", "tcp_to_goal_distance"),
+):
+    reward_term(_name, (_feature,), DistanceParams)(_distance_term(_feature))
 
 
-@reward_term("lift", LiftParams)
+@reward_term("lift", ("object_height",), LiftParams)
 def lift(f: Features, p: LiftParams) -> float:
     """`object_height / target_height`, clipped to [0, 1]: rewards lifting, saturating at the
     target so the agent is not paid to throw the object upwards."""
     return min(max(f["object_height"] / p.target_height, 0.0), 1.0)
 
 
-@reward_term("grasp")
+@reward_term("grasp", ("object_grasped",))
 def grasp(f: Features, p: NoParams) -> float:
     """1 while both finger pads press on the object (`object_grasped`)."""
     return f["object_grasped"]
 
 
-@reward_term("action_l2")
+@reward_term("action_l2", ("action",))
 def action_l2(f: Features, p: NoParams) -> float:
     """Squared norm of the action; give it a negative weight to penalise large actions."""
     a = f["action"]
     return float(a @ a)
 
 
-@reward_term("native")
+@reward_term("native", ("native_reward",))
 def native(f: Features, p: NoParams) -> float:
     """The simulator suite's own reward (Meta-World's v2 shaped reward, 0..10)."""
     return f["native_reward"]
 
 
-@reward_term("stage_success")
+@reward_term("stage_success", ("stage_success",))
 def stage_success(f: Features, p: NoParams) -> float:
     """1 on steps where the stage's success condition holds (a sparse bonus)."""
     return f["stage_success"]

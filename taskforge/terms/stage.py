@@ -12,12 +12,11 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
-from taskforge.spec import SpecError, SpecIssue, StageSpec, TaskSpec, expected_one_of
+from taskforge.spec import SpecError, SpecIssue, StageSpec, StrictModel, TaskSpec, expected_one_of
 from taskforge.spec.errors import issues_from_validation
 from taskforge.spec.loader import field_names_at
-from taskforge.terms.features import FEATURES, SCALAR_FEATURES, Features
+from taskforge.terms.features import ENV_FEATURES, FEATURES, SCALAR_FEATURES, Features
 from taskforge.terms.rewards import REWARD_TERMS, TermFn
-from taskforge.spec import StrictModel
 
 
 @dataclass(frozen=True)
@@ -105,10 +104,25 @@ def stage_issues(spec: StageSpec, file: str | Path, path: str) -> list[SpecIssue
     return issues
 
 
-def task_issues(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
+def task_issues(task: TaskSpec, file: str | Path, provides: frozenset[str] | None = None) -> list[SpecIssue]:
+    """Registry checks for every stage; with `provides` (the backend's features), also that each
+    term and condition reads only features the backend fills."""
     issues: list[SpecIssue] = []
     for i, stage in enumerate(task.stages):
         issues += stage_issues(stage, file, f"stages[{i}]")
+    if provides is None or issues:
+        return issues
+    available = provides | ENV_FEATURES
+    for i, stage in enumerate(task.stages):
+        for j, term_spec in enumerate(stage.rewards):
+            missing = [f for f in REWARD_TERMS[term_spec.term].reads if f not in available]
+            if missing:
+                msg = f"term '{term_spec.term}' reads {', '.join(missing)}, which the {task.backend.type} backend does not provide"
+                issues.append(SpecIssue(str(file), f"stages[{i}].rewards[{j}].term", msg))
+        for j, cond in enumerate(stage.success.all):
+            if cond.feature not in available:
+                msg = f"the {task.backend.type} backend does not provide '{cond.feature}'; it provides {', '.join(sorted(available & SCALAR_FEATURES))}"
+                issues.append(SpecIssue(str(file), f"stages[{i}].success.all[{j}].feature", msg))
     return issues
 
 
