@@ -18,7 +18,7 @@ from gymnasium.spaces import Box
 from taskforge.backends import Backend, GoalOverride, Split, make_backend
 from taskforge.randomization import ActionLatency, AdditiveNoise, PhysicsRandomizer
 from taskforge.spec import SpecError, TaskSpec, expected_one_of
-from taskforge.terms import CompiledStage, Features
+from taskforge.terms import FEATURES, CompiledStage, Features
 
 SPLITS: tuple[Split, ...] = ("train", "test")
 
@@ -26,9 +26,9 @@ SPLITS: tuple[Split, ...] = ("train", "test")
 class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     """One task file as a Gymnasium env, running one stage at a time.
 
-    `reset(options={"stage": ..., "task": ..., "goal_index": ...})` switches the stage, the
-    sub-task of a task set, or pins the goal for that episode; this is how a curriculum drives
-    vectorised workers without rebuilding them.
+    `reset(options={"stage": ..., "task": ..., "goal_index": ..., "replay": ...})` switches the
+    stage, the sub-task of a task set, or pins the goal for that episode (`replay` is only echoed
+    back in `info`); this is how a curriculum drives vectorised workers without rebuilding them.
 
     A vectorised trainer cannot pass options through autoreset, so it sets `next_episode`
     (e.g. with `VectorEnv.set_attr`) to the options the *next* reset without options should use.
@@ -142,7 +142,9 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         goal = GoalOverride(stage.spec.goal.height, stage.spec.goal.distance_scale)
         obs = self.backend.reset(name, self.split, goal_index, goal)
         self._t = 0
-        self._episode = {"stage": self.stage, "task": name, "goal_index": goal_index}
+        # `replay` is the curriculum's label for the episode, echoed back so a trainer can tell
+        # which finished episodes were replays without tracking autoresets itself.
+        self._episode = {"stage": self.stage, "task": name, "goal_index": goal_index, "replay": bool(options.get("replay", False))}
         self._ever_success = False
         self._physics_draw = physics_draw
         features = self.backend.features()
@@ -183,10 +185,20 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             "reward_terms": terms,
         }
         if self.privileged:
-            info["privileged"] = np.concatenate(
-                [features["object_velocity"], features["goal_pos"], self._physics_draw]
-            ).astype(np.float32)
+            out = np.zeros(self.privileged_size, dtype=np.float32)
+            velocity, goal = features.get("object_velocity", ()), features.get("goal_pos", ())
+            parts = np.concatenate([velocity, goal, self._physics_draw])
+            out[: parts.size] = parts  # sub-tasks of a set may draw fewer numbers: zero-padded
+            info["privileged"] = out
         return info
+
+    @property
+    def privileged_size(self) -> int:
+        """Length of `info["privileged"]`: object velocity and goal (when the backend has them)
+        and the largest number of physics draws of any sub-task."""
+        draws = max((r.draw_size for r in self._randomizers.values()), default=0)
+        own = sum(FEATURES[f].size for f in ("object_velocity", "goal_pos") if f in self.backend.provides)
+        return own + draws
 
     def features(self) -> Features:
         """The current features (for scripted policies, tests and debugging)."""

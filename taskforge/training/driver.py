@@ -1,0 +1,84 @@
+"""The glue between the curriculum scheduler and a vector env of `TaskEnv` workers.
+
+Workers reset themselves (gymnasium autoreset, inside the step that ends an episode), so the
+scheduler's choice for a worker's *next* episode is pushed ahead of time into its `next_episode`
+attribute. That reset happens before the trainer learns the episode ended, so a choice drawn at
+the end of episode k starts episode k+2: a lag of one episode per worker. What an episode
+actually ran (stage, sub-task, replay label) comes back in its own `info`, so the driver never
+has to track which pushed choice a worker consumed at which reset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from gymnasium.vector import VectorEnv
+
+from taskforge.curriculum import Assignment, CurriculumEvent, CurriculumScheduler
+
+
+@dataclass
+class EpisodeStats:
+    """Episodes finished since the last `drain()`, for logging."""
+
+    returns: list[float] = field(default_factory=list)
+    lengths: list[int] = field(default_factory=list)
+    successes: list[bool] = field(default_factory=list)
+    stages: list[str] = field(default_factory=list)
+
+
+class CurriculumDriver:
+    def __init__(self, scheduler: CurriculumScheduler, envs: VectorEnv, phase: int, fallback_stage: str):
+        """`fallback_stage`: what a worker plays once the scheduler has moved to another phase
+        and the trainer has not yet rebuilt the envs (recorded as a stale episode)."""
+        self.scheduler = scheduler
+        self.envs = envs
+        self.phase = phase
+        self._fallback = fallback_stage
+        n = envs.num_envs
+        self._return = np.zeros(n)
+        self._length = np.zeros(n, dtype=int)
+        self.stats = EpisodeStats()
+        self.new_events: list[CurriculumEvent] = []
+        self._next: list[dict] = [{} for _ in range(n)]
+        self.push(range(n))
+
+    def _options(self) -> dict:
+        assignment = self.scheduler.assign()
+        if assignment.phase != self.phase:
+            return {"stage": self._fallback}
+        return {"stage": assignment.stage, "task": assignment.task, "replay": assignment.replay}
+
+    def push(self, workers) -> None:
+        """Draw the next episode of `workers` (all others keep what they were given)."""
+        for i in workers:
+            self._next[i] = self._options()
+        self.envs.set_attr("next_episode", list(self._next))
+
+    def on_step(self, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray, infos: dict) -> None:
+        self._return += rewards
+        self._length += 1
+        done = np.flatnonzero(terminated | truncated)
+        if done.size == 0:
+            return
+        final = infos["final_info"]
+        events: list[CurriculumEvent] = []
+        for i in done:
+            assignment = Assignment(self.phase, str(final["stage"][i]), str(final["task"][i]), bool(final["replay"][i]))
+            success = bool(final["episode_success"][i])
+            events += self.scheduler.record(assignment, success, int(self._length[i]))
+            self.stats.returns.append(float(self._return[i]))
+            self.stats.lengths.append(int(self._length[i]))
+            self.stats.successes.append(success)
+            self.stats.stages.append(assignment.stage)
+            self._return[i] = 0.0
+            self._length[i] = 0
+        self.new_events += events
+        # A promotion redraws every worker's next episode so none lingers on the old stage.
+        self.push(range(self.envs.num_envs) if events else done.tolist())
+
+    def drain(self) -> tuple[EpisodeStats, list[CurriculumEvent]]:
+        stats, events = self.stats, self.new_events
+        self.stats, self.new_events = EpisodeStats(), []
+        return stats, events

@@ -1,0 +1,212 @@
+"""`taskforge train`: PPO along a curriculum, with logs, atomic checkpoints and resume.
+
+Reading order: load and check everything (no file is written before the inputs are known to be
+good) -> set up the run directory -> build agent, scheduler and envs -> the loop (collect,
+update, log, maybe rebuild envs for a new phase, maybe evaluate, maybe checkpoint) -> final save.
+"""
+
+from __future__ import annotations
+
+import copy
+import signal
+import sys
+import time
+from dataclasses import asdict
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import VectorEnv
+from tqdm import tqdm
+
+from taskforge.agents import PPOAgent, make_vector_env, set_torch_threads
+from taskforge.curriculum import CurriculumScheduler
+from taskforge.envs import ResolvedCurriculum, TaskEnv, load_curriculum
+from taskforge.evaluation import evaluate
+from taskforge.spec import SpecError
+from taskforge.training.checkpoint import load_checkpoint, save_checkpoint, save_json
+from taskforge.training.driver import CurriculumDriver
+from taskforge.training.metrics import MetricsLogger
+
+CHECKPOINT = "checkpoint.pt"
+FINAL = "final.pt"
+
+
+class Interrupted(Exception):
+    """Training stopped by Ctrl-C or SIGTERM after saving a checkpoint."""
+
+    def __init__(self, step: int, run_dir: Path):
+        super().__init__(f"interrupted at step {step:,}; checkpoint saved in {run_dir} (continue with --resume)")
+        self.step = step
+
+
+def run_config(cur: ResolvedCurriculum, seed: int, total_steps: int) -> dict[str, Any]:
+    """Everything needed to rebuild the run's envs and agent without the original files."""
+    return {
+        "curriculum_file": str(cur.file),
+        "curriculum": cur.spec.model_dump(mode="json"),
+        "agent": cur.agent.model_dump(mode="json"),
+        "phases": [
+            {"task_file": str(p.task_file), "task": p.task.model_dump(mode="json"), "stages": p.stages}
+            for p in cur.phases
+        ],
+        "seed": seed,
+        "total_steps": total_steps,
+    }
+
+
+def _probe(cur: ResolvedCurriculum, privileged: bool) -> tuple[Any, Any, int, list[list[str]]]:
+    """Observation/action spaces and privileged size, which every phase must share (one policy),
+    and each phase's sub-task names."""
+    shapes, task_names = [], []
+    for i, phase in enumerate(cur.phases):
+        env = TaskEnv(phase.task, phase.task_file, privileged=privileged)
+        shapes.append((env.observation_space, env.action_space, env.privileged_size))
+        task_names.append(list(env.backend.task_names))
+        env.close()
+        first = shapes[0]
+        if (env.observation_space.shape, env.action_space.shape) != (first[0].shape, first[1].shape):
+            raise SpecError.single(
+                cur.file, f"phases[{i}].task",
+                f"observation/action shapes {env.observation_space.shape}/{env.action_space.shape} differ from "
+                f"phase 1's {first[0].shape}/{first[1].shape}; one policy needs the same shapes in every phase",
+            )
+    obs_space, act_space, _ = shapes[0]
+    return obs_space, act_space, max(s[2] for s in shapes), task_names
+
+
+def _build_envs(cur: ResolvedCurriculum, phase: int, privileged: bool) -> VectorEnv:
+    spec = cur.agent
+    p = cur.phases[phase]
+    fns = [partial(TaskEnv, p.task, str(p.task_file), split="train", privileged=privileged) for _ in range(spec.ppo.num_envs)]
+    return make_vector_env(fns, spec.runtime)
+
+
+def train(
+    curriculum_file: str | Path,
+    run_dir: str | Path | None = None,
+    seed: int | None = None,
+    steps: int | None = None,
+    resume: bool = False,
+    progress: bool = True,
+) -> Path:
+    """Train along a curriculum; returns the run directory. Raises `SpecError` for bad input
+    (before writing anything) and `Interrupted` after saving a checkpoint on Ctrl-C/SIGTERM."""
+    cur = load_curriculum(curriculum_file)
+    run_dir = Path(run_dir) if run_dir else Path("runs") / f"{cur.spec.name}-seed{cur.spec.seed if seed is None else seed}"
+    ckpt_file = run_dir / CHECKPOINT
+    state: dict[str, Any] | None = None
+    if resume:
+        if not ckpt_file.is_file():
+            raise SpecError.single(run_dir, "", f"no {CHECKPOINT} to resume from; start without --resume")
+        state = load_checkpoint(ckpt_file)
+        stored = state["config"]
+        if stored["curriculum"] != cur.spec.model_dump(mode="json") or stored["agent"] != cur.agent.model_dump(mode="json"):
+            raise SpecError.single(
+                curriculum_file, "", f"differs from the curriculum/agent of the run in {run_dir} (see its config.json); "
+                "resume with the same files or start a new --run-dir",
+            )
+        if seed is not None and seed != stored["seed"]:
+            raise SpecError.single(run_dir, "", f"was started with --seed {stored['seed']}; resume without --seed or with the same one")
+        seed = stored["seed"]
+    elif ckpt_file.exists():
+        raise SpecError.single(run_dir, "", f"already holds a run ({CHECKPOINT}); pass --resume to continue it or choose another --run-dir")
+    seed = cur.spec.seed if seed is None else seed
+    total = steps or (state["config"]["total_steps"] if state else cur.spec.total_steps)
+    config = run_config(cur, seed, total)
+
+    agent_spec = cur.agent
+    privileged = agent_spec.asymmetric_critic
+    set_torch_threads(agent_spec.runtime)
+    obs_space, act_space, privileged_dim, task_names = _probe(cur, privileged)
+    agent = PPOAgent(agent_spec, obs_space, act_space, privileged_dim, seed)
+    scheduler = CurriculumScheduler(cur.spec, [p.stages for p in cur.phases], task_names, seed)
+    if state:
+        agent.load_state_dict(state["agent"])
+        scheduler.load_state_dict(state["curriculum"])
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    save_json(config, run_dir / "config.json")
+    logger = MetricsLogger(run_dir, resume_step=agent.global_step if state else None)
+
+    def snapshot() -> dict[str, Any]:
+        return copy.deepcopy({"config": config, "agent": agent.state_dict(), "curriculum": scheduler.state_dict()})
+
+    every_ckpt = cur.spec.checkpoint.every_steps
+    every_eval = cur.spec.evaluation.every_steps
+    next_ckpt = (agent.global_step // every_ckpt + 1) * every_ckpt
+    next_eval = (agent.global_step // every_eval + 1) * every_eval
+    last_good = snapshot()  # what a Ctrl-C saves: the state after the last complete update
+
+    previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    envs = _build_envs(cur, scheduler.phase, privileged)
+    driver = CurriculumDriver(scheduler, envs, scheduler.phase, cur.phases[scheduler.phase].stages[-1])
+    bar = tqdm(total=total, initial=agent.global_step, unit="step", disable=not progress, dynamic_ncols=True, file=sys.stderr)
+    try:
+        while agent.global_step < total:
+            agent.set_progress(agent.global_step / total)
+            start_step, start_time = agent.global_step, time.perf_counter()
+            agent.collect(envs, driver.on_step)
+            losses = agent.update()
+            sps = (agent.global_step - start_step) / (time.perf_counter() - start_time)
+            episodes, events = driver.drain()
+            for event in events:
+                logger.event(asdict(event))
+                bar.write(f"[{event.step:,}] {event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f})")
+
+            current = [s for s, st in zip(episodes.successes, episodes.stages) if st == scheduler.stage]
+            record: dict[str, Any] = {
+                "phase": scheduler.phase,
+                "stage": scheduler.stage,
+                "steps_per_s": sps,
+                "episodes": len(episodes.returns),
+                "return_mean": float(np.mean(episodes.returns)) if episodes.returns else None,
+                "length_mean": float(np.mean(episodes.lengths)) if episodes.lengths else None,
+                "success_rate": float(np.mean(episodes.successes)) if episodes.successes else None,
+                **{f"window_success/{k}": v for k, v in scheduler.success_rates().items()},
+                **losses,
+            }
+            if agent.global_step >= next_eval:
+                next_eval += every_eval
+                result = _evaluate_current(agent, cur, scheduler, seed)
+                record.update({"eval_success_rate": result.success_rate, "eval_return_mean": float(np.mean(result.returns))})
+                bar.write(f"[{agent.global_step:,}] eval {result.stage} on {result.split}: success {result.success_rate:.2f}")
+            logger.log(agent.global_step, record)
+            bar.update(agent.global_step - start_step)
+            window = scheduler.success_rates().get(f"{scheduler.phase}/{scheduler.stage}", 0.0)
+            bar.set_postfix_str(f"{scheduler.stage} success {window:.2f} | {sps:,.0f} steps/s")
+
+            if scheduler.phase != driver.phase:  # a new task file: new envs, same agent
+                envs.close()
+                envs = _build_envs(cur, scheduler.phase, privileged)
+                driver = CurriculumDriver(scheduler, envs, scheduler.phase, cur.phases[scheduler.phase].stages[-1])
+                agent.reset_envs()
+            last_good = snapshot()
+            if agent.global_step >= next_ckpt:
+                next_ckpt += every_ckpt
+                save_checkpoint(last_good, ckpt_file)
+    except KeyboardInterrupt:
+        save_checkpoint(last_good, ckpt_file)
+        raise Interrupted(last_good["agent"]["global_step"], run_dir) from None
+    finally:
+        bar.close()
+        signal.signal(signal.SIGTERM, previous_term)
+        logger.close()
+        try:
+            envs.close()
+        except Exception:  # workers already gone after a Ctrl-C reached them too
+            pass
+    save_checkpoint(last_good, ckpt_file)
+    save_checkpoint({"config": config, "agent": last_good["agent"]}, run_dir / FINAL)
+    return run_dir
+
+
+def _evaluate_current(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: CurriculumScheduler, seed: int):
+    phase = cur.phases[scheduler.phase]
+    ev = cur.spec.evaluation
+    return evaluate(agent, phase.task, phase.task_file, scheduler.stage, ev.split, ev.episodes, seed=seed + 10_000)
+
+
+def _raise_keyboard_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
