@@ -32,7 +32,7 @@ def _kind_of(path: Path) -> str:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from taskforge.envs import check_task_file, load_curriculum
+    from taskforge.envs import check_task_file, load_curriculum, probe_phases
     from taskforge.spec import load_agent_spec
     from taskforge.summary import agent_summary, curriculum_summary, task_summary
 
@@ -46,7 +46,10 @@ def cmd_validate(args: argparse.Namespace) -> int:
             elif kind == "agent":
                 lines = agent_summary(load_agent_spec(path))
             else:
-                lines = curriculum_summary(load_curriculum(path))
+                curriculum = load_curriculum(path)
+                # One policy for every phase: their observation/action shapes must agree.
+                probe_phases([(p.task, p.task_file) for p in curriculum.phases], curriculum.agent.asymmetric_critic, path)
+                lines = curriculum_summary(curriculum)
         except SpecError as exc:
             issues += exc.issues
             continue
@@ -72,12 +75,38 @@ def cmd_tasks(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from taskforge.envs import load_curriculum
-    from taskforge.summary import curriculum_summary
+    from taskforge.training import Interrupted, train
 
-    curriculum = load_curriculum(args.curriculum)
-    print("\n".join(curriculum_summary(curriculum)))
-    print("training is not implemented yet (see the training issue); the curriculum above is valid.")
+    if args.steps is not None and args.steps < 1:
+        raise SpecError.single("--steps", "", f"expected a positive number of steps (got {args.steps})")
+    try:
+        run_dir = train(args.curriculum, run_dir=args.run_dir, seed=args.seed, steps=args.steps,
+                        resume=args.resume, progress=not args.no_progress)
+    except Interrupted as exc:
+        print(str(exc), file=sys.stderr)
+        return 130
+    print(f"done: {run_dir} (final policy {run_dir / 'final.pt'})")
+    return 0
+
+
+def cmd_eval(args: argparse.Namespace) -> int:
+    from taskforge.evaluation.report import evaluate_run, format_table
+    from taskforge.training.checkpoint import save_json
+
+    if args.episodes < 1:
+        raise SpecError.single("--episodes", "", f"expected at least 1 episode (got {args.episodes})")
+    report = evaluate_run(args.run, split=args.split, episodes=args.episodes, stages=args.stage, seed=args.seed)
+    print(format_table(report))
+    if args.out:
+        save_json(report, Path(args.out))
+        print(f"wrote {args.out}")
+    return 0
+
+
+def cmd_plot(args: argparse.Namespace) -> int:
+    from taskforge.evaluation.plot import plot_run
+
+    print(f"wrote {plot_run(args.run_dir, args.out)}")
     return 0
 
 
@@ -96,7 +125,26 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("train", help="train an agent along a curriculum")
     p.add_argument("curriculum")
+    p.add_argument("--run-dir", help="default: runs/<curriculum name>-seed<seed>")
+    p.add_argument("--seed", type=int, help="default: the curriculum's seed")
+    p.add_argument("--steps", type=int, help="total env steps (default: the curriculum's total_steps)")
+    p.add_argument("--resume", action="store_true", help="continue from the run directory's last checkpoint")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (e.g. in logs)")
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("eval", help="evaluate a trained policy on held-out goals")
+    p.add_argument("run", metavar="RUN_DIR_OR_CHECKPOINT")
+    p.add_argument("--split", choices=["train", "test"], default="test")
+    p.add_argument("--episodes", type=int, default=20, help="episodes per task and stage (default 20)")
+    p.add_argument("--stage", action="append", help="only these stages (repeatable)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", help="write the report as JSON here")
+    p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("plot", help="learning curves of a run as a PNG")
+    p.add_argument("run_dir")
+    p.add_argument("--out", help="default: RUN_DIR/curves.png")
+    p.set_defaults(func=cmd_plot)
     return parser
 
 

@@ -37,8 +37,8 @@ def compute_gae(
         terminated, truncated: boolean end-of-episode flags of step t.
         gamma, lam: discount and GAE's lambda.
     """
-    not_terminal = 1.0 - terminated.float()
-    not_done = 1.0 - (terminated | truncated).float()
+    not_terminal = 1.0 - terminated.to(rewards.dtype)
+    not_done = 1.0 - (terminated | truncated).to(rewards.dtype)
     advantages = torch.zeros_like(rewards)
     last_gae = torch.zeros_like(rewards[0])
     for t in reversed(range(rewards.shape[0])):

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
+
+from gymnasium.spaces import Box
 
 from taskforge.backends import Split
 from taskforge.envs.resolve import load_task
 from taskforge.envs.task_env import TaskEnv
-from taskforge.spec import TaskSpec
+from taskforge.spec import SpecError, TaskSpec
 
 
 def check_task_file(task_file: str | Path) -> TaskSpec:
@@ -38,3 +42,37 @@ def make(
     """
     spec = load_task(task_file)
     return TaskEnv(spec, task_file, stage=stage, split=split, seed=seed, task_name=task, privileged=privileged)
+
+
+@dataclass(frozen=True)
+class PhaseShapes:
+    observation_space: Box
+    action_space: Box
+    privileged_size: int
+    """The largest `info["privileged"]` of any phase (the critic's extra input)."""
+    task_names: list[list[str]]
+    """Each phase's sub-task names."""
+
+
+def probe_phases(
+    phases: Sequence[tuple[TaskSpec, str | Path]], privileged: bool, file: str | Path = "<curriculum>"
+) -> PhaseShapes:
+    """Build each phase's env once to read its spaces; one policy needs the same observation and
+    action shapes in every phase, so a mismatch is the curriculum's mistake (`phases[i].task`)."""
+    first: TaskEnv | None = None
+    sizes, names = [], []
+    for i, (task, task_file) in enumerate(phases):
+        env = TaskEnv(task, task_file, privileged=privileged)
+        sizes.append(env.privileged_size)
+        names.append(list(env.backend.task_names))
+        env.close()
+        if first is None:
+            first = env
+        elif (env.observation_space.shape, env.action_space.shape) != (first.observation_space.shape, first.action_space.shape):
+            raise SpecError.single(
+                file, f"phases[{i}].task",
+                f"observation/action shapes {env.observation_space.shape}/{env.action_space.shape} differ from phase 1's "
+                f"{first.observation_space.shape}/{first.action_space.shape}; one policy needs the same shapes in every phase",
+            )
+    assert first is not None, "a curriculum has at least one phase"
+    return PhaseShapes(first.observation_space, first.action_space, max(sizes), names)

@@ -13,4 +13,4 @@ def sample(dist: Distribution, rng: np.random.Generator, size: int | tuple[int, 
         return rng.uniform(dist.low, dist.high, size)
     if dist.dist == "loguniform":
         return np.exp(rng.uniform(np.log(dist.low), np.log(dist.high), size))
-    return rng.normal(dist.mean, dist.std, size)
+    return rng.normal(dist.mean or 0.0, dist.std, size)

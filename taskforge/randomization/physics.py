@@ -203,6 +203,8 @@ def _resolve(
     if term.target == "body_mass":
         chosen = [i for i in chosen if i > 0 and model.body_mass[i] > 0]  # the world has no mass
     if term.target == "object_size":
+        if not chosen:
+            raise SpecError.single(file, f"{path}.names", "this environment has no main object geom to resize; name the geoms in 'names'")
         bad = [names[i] for i in chosen if model.geom_type[i] not in _RESIZABLE_GEOMS]
         if bad:
             raise SpecError.single(file, f"{path}.names", f"object_size needs primitive geoms; {', '.join(bad)} is a mesh or plane")

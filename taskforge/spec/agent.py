@@ -69,10 +69,19 @@ class RuntimeSpec(StrictModel):
 
 
 class AgentSpec(StrictModel):
-    name: str
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-.]+$")
     algo: Literal["ppo"] = "ppo"
     policy: PolicySpec = PolicySpec()
     asymmetric_critic: bool = False
     """The critic also sees privileged features (object velocity, goal, drawn physics)."""
     ppo: PPOSpec = PPOSpec()
     runtime: RuntimeSpec = RuntimeSpec()
+
+    @model_validator(mode="after")
+    def _recurrent_minibatches(self) -> "AgentSpec":
+        if self.policy.type == "lstm" and self.ppo.num_minibatches > self.ppo.num_envs:
+            raise ValueError(
+                f"an LSTM policy trains on whole env sequences, so ppo.num_minibatches "
+                f"({self.ppo.num_minibatches}) must be <= ppo.num_envs ({self.ppo.num_envs})"
+            )
+        return self

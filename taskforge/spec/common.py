@@ -18,7 +18,7 @@ class StrictModel(BaseModel):
 class Distribution(StrictModel):
     """A scalar distribution, as in the physics-randomisation table of *Learning Dexterity*.
 
-    `uniform` and `loguniform` use `low`/`high`; `normal` uses `mean`/`std`. Loguniform draws
+    `uniform` and `loguniform` use `low`/`high`; `normal` uses `mean` (default 0) and `std`. Loguniform draws
     `exp(U(log low, log high))`, which is what a ×[0.3, 3] damping range wants: as likely to halve
     as to double.
     """
@@ -26,7 +26,7 @@ class Distribution(StrictModel):
     dist: Literal["uniform", "loguniform", "normal"]
     low: float | None = None
     high: float | None = None
-    mean: float = 0.0
+    mean: float | None = None
     std: float | None = Field(default=None, ge=0.0)
 
     @model_validator(mode="after")
@@ -40,8 +40,8 @@ class Distribution(StrictModel):
                 raise ValueError(f"'low' ({self.low}) must be <= 'high' ({self.high})")
             if self.dist == "loguniform" and self.low <= 0:
                 raise ValueError(f"a loguniform distribution needs 'low' > 0 (got {self.low})")
-            if self.std is not None:
-                raise ValueError(f"'std' belongs to a normal distribution, not {self.dist}")
+            if self.std is not None or self.mean is not None:
+                raise ValueError(f"'mean'/'std' belong to a normal distribution, not {self.dist}")
         else:
             if self.std is None:
                 raise ValueError("a normal distribution needs 'std' (>= 0)")
@@ -51,18 +51,5 @@ class Distribution(StrictModel):
 
     def describe(self) -> str:
         if self.dist == "normal":
-            return f"N({self.mean:g}, {self.std:g})"
+            return f"N({self.mean or 0.0:g}, {self.std:g})"
         return f"{self.dist}[{self.low:g}, {self.high:g}]"
-
-
-class Range(StrictModel):
-    """A closed interval with low <= high (e.g. an integer latency range or a goal box side)."""
-
-    low: float
-    high: float
-
-    @model_validator(mode="after")
-    def _ordered(self) -> "Range":
-        if self.low > self.high:
-            raise ValueError(f"'low' ({self.low}) must be <= 'high' ({self.high})")
-        return self

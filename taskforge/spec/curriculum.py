@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from taskforge.spec.common import StrictModel
 
@@ -56,13 +56,22 @@ class PhaseSpec(StrictModel):
     """Path to a task file, relative to the curriculum file."""
     stages: list[str] = Field(default_factory=list)
     """Stages in order; empty = every stage of the task, in file order."""
+
+    @field_validator("stages")
+    @classmethod
+    def _unique(cls, stages: list[str]) -> list[str]:
+        dupes = sorted({s for s in stages if stages.count(s) > 1})
+        if dupes:
+            raise ValueError(f"a stage may appear once per phase; repeated: {', '.join(dupes)}")
+        return stages
     promotion: PromotionSpec | None = None
     """Overrides the curriculum-wide promotion rule for this phase."""
     sampling: SamplingSpec | None = None
 
 
 class CurriculumSpec(StrictModel):
-    name: str
+    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-.]+$")
+    """Also names the default run directory (runs/<name>-seed<seed>)."""
     agent: str
     """Path to an agent preset, relative to the curriculum file."""
     seed: int = 0

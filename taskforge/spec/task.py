@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
-from taskforge.spec.common import Distribution, Range, StrictModel
+from taskforge.spec.common import Distribution, StrictModel
 
 Name = Annotated[str, Field(min_length=1, pattern=r"^[A-Za-z0-9_\-]+$")]
 
@@ -132,7 +132,7 @@ class PhysicsTermSpec(Distribution):
 
 
 class NoiseSpec(StrictModel):
-    """Additive Gaussian-style noise: `per_step` redrawn every step, `per_episode` once per
+    """Additive noise (any `Distribution`, usually a zero-mean normal): `per_step` redrawn every step, `per_episode` once per
     episode (the correlated noise of *Learning Dexterity*)."""
 
     per_step: Distribution | None = None
@@ -168,15 +168,6 @@ class GoalSplitSpec(StrictModel):
     for Gymnasium envs, reset seeds."""
 
     count: int = Field(default=50, ge=1, le=1_000_000)
-    region: "RegionSpec | None" = None
-
-
-class RegionSpec(StrictModel):
-    """An axis-aligned box of goal positions (metres), for backends that sample goals."""
-
-    x: Range
-    y: Range
-    z: Range
 
 
 class GoalsSpec(StrictModel):
@@ -188,9 +179,6 @@ class GoalsSpec(StrictModel):
     """Seed of the goal sets themselves: with the same seed, everyone gets the same goals."""
     train: GoalSplitSpec = GoalSplitSpec()
     test: GoalSplitSpec = GoalSplitSpec()
-
-
-GoalSplitSpec.model_rebuild()
 
 
 # --- the task file -------------------------------------------------------------------------

@@ -98,6 +98,8 @@ def stage_issues(spec: StageSpec, file: str | Path, path: str) -> list[SpecIssue
         if cond.feature not in FEATURES:
             msg = f"unknown feature '{cond.feature}'; {expected_one_of(cond.feature, SCALAR_FEATURES)}"
             issues.append(SpecIssue(str(file), where, msg))
+        elif cond.feature == "stage_success":
+            issues.append(SpecIssue(str(file), where, "'stage_success' is this condition's own result; use another feature"))
         elif cond.feature not in SCALAR_FEATURES:
             msg = f"'{cond.feature}' is a vector; a condition needs a scalar feature: {', '.join(sorted(SCALAR_FEATURES))}"
             issues.append(SpecIssue(str(file), where, msg))

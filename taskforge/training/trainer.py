@@ -22,7 +22,7 @@ from tqdm import tqdm
 
 from taskforge.agents import PPOAgent, make_vector_env, set_torch_threads
 from taskforge.curriculum import CurriculumScheduler
-from taskforge.envs import ResolvedCurriculum, TaskEnv, load_curriculum
+from taskforge.envs import ResolvedCurriculum, TaskEnv, load_curriculum, probe_phases
 from taskforge.evaluation import evaluate
 from taskforge.spec import SpecError
 from taskforge.training.checkpoint import load_checkpoint, save_checkpoint, save_json
@@ -54,26 +54,6 @@ def run_config(cur: ResolvedCurriculum, seed: int, total_steps: int) -> dict[str
         "seed": seed,
         "total_steps": total_steps,
     }
-
-
-def _probe(cur: ResolvedCurriculum, privileged: bool) -> tuple[Any, Any, int, list[list[str]]]:
-    """Observation/action spaces and privileged size, which every phase must share (one policy),
-    and each phase's sub-task names."""
-    shapes, task_names = [], []
-    for i, phase in enumerate(cur.phases):
-        env = TaskEnv(phase.task, phase.task_file, privileged=privileged)
-        shapes.append((env.observation_space, env.action_space, env.privileged_size))
-        task_names.append(list(env.backend.task_names))
-        env.close()
-        first = shapes[0]
-        if (env.observation_space.shape, env.action_space.shape) != (first[0].shape, first[1].shape):
-            raise SpecError.single(
-                cur.file, f"phases[{i}].task",
-                f"observation/action shapes {env.observation_space.shape}/{env.action_space.shape} differ from "
-                f"phase 1's {first[0].shape}/{first[1].shape}; one policy needs the same shapes in every phase",
-            )
-    obs_space, act_space, _ = shapes[0]
-    return obs_space, act_space, max(s[2] for s in shapes), task_names
 
 
 def _build_envs(cur: ResolvedCurriculum, phase: int, privileged: bool) -> VectorEnv:
@@ -119,9 +99,9 @@ def train(
     agent_spec = cur.agent
     privileged = agent_spec.asymmetric_critic
     set_torch_threads(agent_spec.runtime)
-    obs_space, act_space, privileged_dim, task_names = _probe(cur, privileged)
-    agent = PPOAgent(agent_spec, obs_space, act_space, privileged_dim, seed)
-    scheduler = CurriculumScheduler(cur.spec, [p.stages for p in cur.phases], task_names, seed)
+    shapes = probe_phases([(p.task, p.task_file) for p in cur.phases], privileged, cur.file)
+    agent = PPOAgent(agent_spec, shapes.observation_space, shapes.action_space, shapes.privileged_size, seed)
+    scheduler = CurriculumScheduler(cur.spec, [p.stages for p in cur.phases], shapes.task_names, seed)
     if state:
         agent.load_state_dict(state["agent"])
         scheduler.load_state_dict(state["curriculum"])
