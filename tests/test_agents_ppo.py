@@ -151,6 +151,15 @@ def test_one_update_lowers_the_losses_on_its_batch():
         agent.update()  # the rollout is spent
 
 
+def test_target_kl_stops_the_epochs_early():
+    spec = agent_spec(policy={"hidden_sizes": [32]}, ppo={**SMALL_PPO, "update_epochs": 5, "target_kl": 1e-9})
+    envs = pendulum_envs(spec)
+    agent = make_agent(spec, envs)
+    agent.collect(envs)
+    envs.close()
+    assert agent.update()["epochs"] == 1.0
+
+
 # ---------------------------------------------------------------------------------- checkpoints
 
 def test_state_dict_round_trips_through_torch_save_and_resumes_exactly(tmp_path):
@@ -231,7 +240,8 @@ def test_truncation_bootstraps_from_the_final_observation_and_privileged_vector(
     assert len(truncations) == 3 * 4  # 32 steps, episodes of 10
     for step, env, critic_input in truncations:
         with torch.no_grad():
-            expected, _ = agent.policy.value(torch.as_tensor(critic_input).view(1, 1, -1), None, torch.zeros(1, 1, dtype=torch.bool))
+            critic_obs = torch.as_tensor(critic_input).view(1, 1, -1)
+            expected, _ = agent.policy.value(critic_obs, None, torch.zeros(1, 1, dtype=torch.bool))
         assert agent.buffer.truncated[step, env]
         torch.testing.assert_close(agent.buffer.final_values[step, env], expected[0, 0])
     assert agent.buffer.final_values[~agent.buffer.truncated].eq(0).all()
@@ -241,7 +251,8 @@ def test_truncation_bootstraps_from_the_final_observation_and_privileged_vector(
 
 @pytest.mark.parametrize("policy_type", ["mlp", "lstm"])
 def test_asymmetric_critic_trains_on_an_env_with_privileged_info(policy_type):
-    spec = agent_spec(policy={"type": policy_type, "hidden_sizes": [32], "lstm_hidden_size": 16}, ppo=SMALL_PPO, asymmetric_critic=True)
+    policy = {"type": policy_type, "hidden_sizes": [32], "lstm_hidden_size": 16}
+    spec = agent_spec(policy=policy, ppo=SMALL_PPO, asymmetric_critic=True)
     envs = pendulum_envs(spec, max_episode_steps=20, privileged=True)
     agent = make_agent(spec, envs, privileged=True)
     metrics = train(agent, envs, 2)

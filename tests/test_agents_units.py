@@ -23,6 +23,7 @@ from taskforge.agents import (
     RunningMeanStd,
     SquashGaussian,
     compute_gae,
+    set_torch_threads,
 )
 from taskforge.agents.policies import ActorCritic
 from taskforge.spec.agent import AgentSpec, PolicySpec
@@ -41,7 +42,7 @@ def one_torch_thread():
 
 
 def agent_spec(**sections) -> AgentSpec:
-    return AgentSpec.model_validate({"name": "test", "runtime": {"vector": "sync"}, **sections})
+    return AgentSpec.model_validate({"name": "test", **sections})
 
 
 # --------------------------------------------------------------------------------------------- GAE
@@ -249,8 +250,9 @@ def test_lstm_sequence_evaluation_resets_at_episode_starts_inside_the_sequence()
     generator = torch.Generator().manual_seed(0)
     with torch.no_grad():
         logprob, _, value = policy.evaluate(obs, obs, actions, state, starts, generator)
+        fresh, no_starts = policy.initial_state(1), torch.zeros(T - k, 1, dtype=torch.bool)
         suffix_logprob, _, suffix_value = policy.evaluate(
-            obs[k:, :1], obs[k:, :1], actions[k:, :1], policy.initial_state(1), torch.zeros(T - k, 1, dtype=torch.bool), generator
+            obs[k:, :1], obs[k:, :1], actions[k:, :1], fresh, no_starts, generator
         )
     torch.testing.assert_close(logprob[k:, :1], suffix_logprob, rtol=0, atol=1e-6)
     torch.testing.assert_close(value[k:, :1], suffix_value, rtol=0, atol=1e-6)
@@ -276,7 +278,8 @@ def test_sequence_minibatches_keep_whole_env_sequences_with_their_initial_state(
             seen.append(env)
     assert sorted(seen) == list(range(N))  # the minibatches partition the envs
 
-    flat = [mb.obs.reshape(-1, 2) for mb in buffer.minibatches(4, torch.Generator().manual_seed(0), whole_sequences=False)]
+    flat_batches = buffer.minibatches(4, torch.Generator().manual_seed(0), whole_sequences=False)
+    flat = [mb.obs.reshape(-1, 2) for mb in flat_batches]
     pairs = sorted(map(tuple, torch.cat(flat).int().tolist()))
     assert pairs == [(t, e) for t in range(T) for e in range(N)]  # flat minibatches: each step once
 
@@ -289,9 +292,11 @@ def test_asymmetric_critic_input_is_obs_plus_privileged_and_actor_input_is_obs(p
         policy={"type": policy_type, "hidden_sizes": [16]}, ppo={"num_minibatches": 4}, asymmetric_critic=True
     )
     policy = PPOAgent(spec, OBS_SPACE, ACTION_SPACE, privileged_dim=5).policy
-    first_layer = (lambda torso: torso.lstm.input_size) if policy_type == "lstm" else (lambda torso: torso.net[0].in_features)
-    assert first_layer(policy.actor) == 3
-    assert first_layer(policy.critic) == 3 + 5
+    def input_size(torso) -> int:
+        return torso.lstm.input_size if policy_type == "lstm" else torso.net[0].in_features
+
+    assert input_size(policy.actor) == policy.actor.in_dim == 3
+    assert input_size(policy.critic) == policy.critic.in_dim == 3 + 5
 
 
 def test_symmetric_spec_ignores_privileged_dim_and_asymmetric_spec_requires_it():
@@ -315,6 +320,11 @@ def test_set_progress_anneals_learning_rate_linearly():
     fixed = PPOAgent(agent_spec(ppo={"learning_rate": 1e-3, "anneal_lr": False}), OBS_SPACE, ACTION_SPACE)
     fixed.set_progress(0.5)
     assert fixed.optimizer.param_groups[0]["lr"] == 1e-3
+
+
+def test_set_torch_threads_follows_the_runtime_spec():
+    set_torch_threads(agent_spec(runtime={"torch_threads": 2}).runtime)
+    assert torch.get_num_threads() == 2
 
 
 def test_construction_is_seeded_and_leaves_the_global_rng_alone():

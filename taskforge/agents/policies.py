@@ -97,7 +97,9 @@ class LSTMTorso(nn.Module):
         size = (1, num_envs, self.lstm.hidden_size)  # LSTM detail #2: the state starts at zero
         return torch.zeros(size), torch.zeros(size)
 
-    def forward(self, x: torch.Tensor, state: LSTMHidden, episode_starts: torch.Tensor) -> tuple[torch.Tensor, LSTMHidden]:
+    def forward(
+        self, x: torch.Tensor, state: LSTMHidden, episode_starts: torch.Tensor
+    ) -> tuple[torch.Tensor, LSTMHidden]:
         h, c = state
         outputs = []
         for x_t, start_t in zip(x, episode_starts):

@@ -123,7 +123,9 @@ class PPOAgent:
             if not isinstance(space, gymnasium.spaces.Box) or len(space.shape) != 1:
                 raise ValueError(f"PPOAgent needs a flat Box {name} space, got {space}")
         if spec.asymmetric_critic and privileged_dim < 1:
-            raise ValueError("asymmetric_critic is set, so PPOAgent needs privileged_dim >= 1 (the length of info['privileged'])")
+            raise ValueError(
+                "asymmetric_critic is set, so PPOAgent needs privileged_dim >= 1 (the length of info['privileged'])"
+            )
         ppo = spec.ppo
         if spec.policy.type == "lstm" and ppo.num_minibatches > ppo.num_envs:
             raise ValueError(
@@ -140,10 +142,12 @@ class PPOAgent:
         with torch.random.fork_rng(devices=[]):  # seeded init without disturbing the caller's global RNG
             torch.manual_seed(seed)
             self.policy = ActorCritic(spec.policy, obs_dim, critic_dim, action_space)
-        self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=ppo.learning_rate, eps=1e-5, foreach=True)  # detail #3
+        # Adam with eps 1e-5 (detail #3); foreach batches the per-tensor kernels, which dominate for small nets on CPU
+        self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=ppo.learning_rate, eps=1e-5, foreach=True)
         self.generator = torch.Generator().manual_seed(seed)
         self.obs_normalizer = ObservationNormalizer(obs_dim, ppo.norm_obs)
-        self.privileged_normalizer = ObservationNormalizer(self.privileged_dim, ppo.norm_obs and self.privileged_dim > 0)
+        has_privileged = self.privileged_dim > 0
+        self.privileged_normalizer = ObservationNormalizer(self.privileged_dim, ppo.norm_obs and has_privileged)
         self.reward_scaler = RewardScaler(ppo.num_envs, ppo.gamma, ppo.norm_reward)
         self.buffer = RolloutBuffer(ppo.rollout_steps, ppo.num_envs, obs_dim, critic_dim, action_space.shape[0])
 
@@ -199,7 +203,7 @@ class PPOAgent:
                 actions=raw_action[0],
                 logprobs=logprob[0],
                 values=value[0],
-                rewards=self.reward_scaler(reward, terminated, truncated),  # reward scaling + clipping (continuous #8, #9)
+                rewards=self.reward_scaler(reward, terminated, truncated),  # continuous details #8, #9
                 terminated=torch.as_tensor(terminated),
                 truncated=torch.as_tensor(truncated),
                 final_values=self._truncation_values(infos, truncated & ~terminated, state),
@@ -285,7 +289,8 @@ class PPOAgent:
                 loss = ppo_loss(self.policy, mb, ppo, self.generator)
                 self.optimizer.zero_grad()
                 loss.total.backward()
-                nn.utils.clip_grad_norm_(self.policy.parameters(), ppo.max_grad_norm)  # global gradient clipping (detail #11)
+                # global gradient clipping (detail #11)
+                nn.utils.clip_grad_norm_(self.policy.parameters(), ppo.max_grad_norm)
                 self.optimizer.step()
                 for name in ("policy_loss", "value_loss", "entropy", "approx_kl", "old_approx_kl", "clipfrac"):
                     totals[name] = totals.get(name, 0.0) + getattr(loss, name)
@@ -346,7 +351,8 @@ class PPOAgent:
         return (env_action[0] if obs.ndim == 1 else env_action), state
 
     def reset_envs(self) -> None:
-        """Forget the carried observation, so the next `collect()` resets the (rebuilt) envs."""
+        """Forget the carried observation and recurrent state, so the next `collect()` resets the
+        (rebuilt) envs and the reward scaler's per-episode returns."""
         self._obs = self._critic_obs = self._episode_starts = None
         self._state = None
         self._rollout_ready = False
@@ -355,9 +361,9 @@ class PPOAgent:
 
     def state_dict(self) -> dict:
         """Everything needed to resume learning exactly: networks, optimizer, normaliser
-        statistics, the RNG and counters. Only tensors and plain Python values, so it loads with
-        `torch.load(weights_only=True)`. The episodes in flight are not saved (the envs are not
-        the agent's): after loading, the next `collect()` resets the envs."""
+        statistics, the seed, the RNG and counters. Only tensors and plain Python values, so it
+        loads with `torch.load(weights_only=True)`. The episodes in flight are not saved (the envs
+        are not the agent's): after loading, the next `collect()` resets the envs."""
         return {
             "policy": self.policy.state_dict(),
             "optimizer": self.optimizer.state_dict(),
@@ -365,6 +371,7 @@ class PPOAgent:
             "privileged_normalizer": self.privileged_normalizer.rms.state_dict(),
             "reward_scaler": self.reward_scaler.rms.state_dict(),
             "generator": self.generator.get_state(),
+            "seed": self.seed,
             "global_step": self.global_step,
             "num_updates": self.num_updates,
             "progress": self.progress,
@@ -378,6 +385,7 @@ class PPOAgent:
         self.privileged_normalizer.rms.load_state_dict(state["privileged_normalizer"])
         self.reward_scaler.rms.load_state_dict(state["reward_scaler"])
         self.generator.set_state(state["generator"])
+        self.seed = state["seed"]  # env reset seeds derive from it
         self.global_step = state["global_step"]
         self.num_updates = state["num_updates"]
         self.progress = state["progress"]

@@ -107,6 +107,8 @@ def train(
         scheduler.load_state_dict(state["curriculum"])
 
     run_dir.mkdir(parents=True, exist_ok=True)
+    for stale in run_dir.glob(".*.tmp"):  # half-written by a process killed mid-save
+        stale.unlink()
     save_json(config, run_dir / "config.json")
     logger = MetricsLogger(run_dir, resume_step=agent.global_step if state else None)
 

@@ -1,0 +1,212 @@
+"""The training loop end to end on tiny budgets: curriculum promotion, checkpoints, interrupt
+and resume, evaluation reports, plots, and bad CLI input."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import torch
+import yaml
+
+from taskforge.cli import main
+from taskforge.training import train
+from taskforge.training.checkpoint import load_checkpoint
+from taskforge.training.metrics import read_jsonl
+from tests.conftest import ROOT
+
+# Pendulum is a fast stand-in simulator; the curriculum logic is the same for every backend.
+TASK = {
+    "name": "pendulum-two-stage",
+    "backend": {"type": "gymnasium", "env": "Pendulum-v1"},
+    "max_episode_steps": 100,
+    "goals": {"train": {"count": 1000}, "test": {"count": 10}},
+    "stages": [
+        # always succeeds: promotion as soon as the window is full and min_steps passed
+        {"name": "easy", "rewards": [{"term": "native"}], "success": {"all": [{"feature": "native_return", "above": -1e9}]}},
+        {"name": "hard", "rewards": [{"term": "native"}], "success": {"all": [{"feature": "native_return", "above": 1e9}]}},
+    ],
+}
+AGENT = {
+    "name": "tiny",
+    "policy": {"hidden_sizes": [32, 32]},
+    "ppo": {"num_envs": 2, "rollout_steps": 100, "num_minibatches": 2, "update_epochs": 2},
+    "runtime": {"vector": "sync"},
+}
+
+
+def write_curriculum(folder: Path, **overrides) -> Path:
+    (folder / "task.yaml").write_text(yaml.safe_dump(TASK))
+    (folder / "agent.yaml").write_text(yaml.safe_dump(AGENT))
+    doc = {
+        "name": "tiny",
+        "agent": "agent.yaml",
+        "seed": 3,
+        "total_steps": 1200,
+        "phases": [{"task": "task.yaml"}],
+        "promotion": {"threshold": 0.9, "window": 4, "min_steps": 300},
+        "replay": {"fraction": 0.0},
+        "evaluation": {"every_steps": 600, "episodes": 2},
+        "checkpoint": {"every_steps": 200},
+    }
+    doc.update(overrides)
+    path = folder / "curriculum.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_train_promotes_logs_checkpoints_and_writes_final_policy(tmp_path):
+    run = train(write_curriculum(tmp_path), run_dir=tmp_path / "run", progress=False)
+    events = read_jsonl(run / "events.jsonl")
+    assert [(e["kind"], e["from_stage"], e["to_stage"]) for e in events] == [("promote", "easy", "hard")]
+    assert events[0]["step"] >= 300  # min_steps
+    metrics = read_jsonl(run / "metrics.jsonl")
+    assert [m["step"] for m in metrics] == list(range(200, 1201, 200))
+    assert metrics[0]["stage"] == "easy" and metrics[-1]["stage"] == "hard"
+    for key in ("return_mean", "steps_per_s", "policy_loss", "value_loss", "entropy", "approx_kl", "learning_rate"):
+        assert key in metrics[-1], key
+    assert "eval_success_rate" in metrics[2]  # step 600
+    assert any((run / "tensorboard").iterdir())
+    assert json.loads((run / "config.json").read_text())["seed"] == 3
+    ckpt = load_checkpoint(run / "checkpoint.pt")
+    assert ckpt["agent"]["global_step"] == 1200
+    assert ckpt["curriculum"] and (run / "final.pt").is_file()
+
+
+def test_same_seed_same_run(tmp_path):
+    cur = write_curriculum(tmp_path, total_steps=400)
+    a = load_checkpoint(train(cur, run_dir=tmp_path / "a", progress=False) / "final.pt")
+    b = load_checkpoint(train(cur, run_dir=tmp_path / "b", progress=False) / "final.pt")
+    for key, value in a["agent"]["policy"].items():
+        assert torch.equal(value, b["agent"]["policy"][key]), key
+
+
+def test_resume_continues_step_count_and_curriculum_state(tmp_path):
+    cur = write_curriculum(tmp_path)
+    run = tmp_path / "run"
+    train(cur, run_dir=run, steps=600, progress=False)
+    first = load_checkpoint(run / "checkpoint.pt")
+    assert first["agent"]["global_step"] == 600
+    train(cur, run_dir=run, steps=1200, resume=True, progress=False)
+    second = load_checkpoint(run / "checkpoint.pt")
+    assert second["agent"]["global_step"] == 1200
+    steps = [m["step"] for m in read_jsonl(run / "metrics.jsonl")]
+    assert steps == sorted(set(steps)) and steps[-1] == 1200  # no duplicates across the resume
+    # the curriculum picked up where it left off: one promotion in the whole run
+    assert len(read_jsonl(run / "events.jsonl")) == 1
+    assert second["curriculum"]["events"][:len(first["curriculum"]["events"])] == first["curriculum"]["events"]
+
+
+def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
+    cur = write_curriculum(tmp_path, total_steps=100_000, checkpoint={"every_steps": 100_000})
+    run = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "taskforge.cli", "train", str(cur), "--run-dir", str(run), "--no-progress"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    deadline = time.time() + 60
+    while time.time() < deadline and len(read_jsonl(run / "metrics.jsonl")) < 2:
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "interrupted at step" in err and "Traceback" not in err
+    saved = load_checkpoint(run / "checkpoint.pt")
+    step = saved["agent"]["global_step"]
+    assert step >= 400
+    with open(run / "checkpoint.pt", "rb") as f:
+        before = hashlib.sha256(f.read()).hexdigest()
+    # a second plain `train` into the same dir refuses and leaves the checkpoint untouched
+    assert main(["train", str(cur), "--run-dir", str(run), "--no-progress"]) == 2
+    with open(run / "checkpoint.pt", "rb") as f:
+        assert hashlib.sha256(f.read()).hexdigest() == before
+    train(cur, run_dir=run, steps=step + 200, resume=True, progress=False)
+    assert load_checkpoint(run / "checkpoint.pt")["agent"]["global_step"] == step + 200
+
+
+def test_kill_at_any_moment_leaves_a_loadable_checkpoint(tmp_path):
+    cur = write_curriculum(tmp_path, total_steps=100_000, checkpoint={"every_steps": 200})
+    run = tmp_path / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "taskforge.cli", "train", str(cur), "--run-dir", str(run), "--no-progress"],
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    deadline = time.time() + 60
+    while time.time() < deadline and not (run / "checkpoint.pt").exists():
+        time.sleep(0.05)
+    time.sleep(1.0)
+    os.kill(proc.pid, signal.SIGKILL)  # no chance to clean up
+    proc.wait()
+    state = load_checkpoint(run / "checkpoint.pt")
+    assert state["agent"]["global_step"] % 200 == 0
+    # resuming sweeps away a half-written temp file the kill may have left
+    train(cur, run_dir=run, steps=state["agent"]["global_step"] + 200, resume=True, progress=False)
+    assert not list(run.glob(".*.tmp"))
+
+
+def test_eval_writes_a_well_formed_report(tmp_path, capsys):
+    run = train(write_curriculum(tmp_path, total_steps=400), run_dir=tmp_path / "run", progress=False)
+    out = tmp_path / "report.json"
+    assert main(["eval", str(run), "--episodes", "3", "--out", str(out)]) == 0
+    table = capsys.readouterr().out
+    assert "95% CI" in table and "easy" in table and "hard" in table
+    report = json.loads(out.read_text())
+    assert report["split"] == "test" and report["step"] == 400
+    assert [r["stage"] for r in report["rows"]] == ["easy", "hard"]
+    for row in report["rows"]:
+        assert row["episodes"] == 3
+        low, high = row["success_ci95"]
+        assert 0.0 <= low <= row["success_rate"] <= high <= 1.0
+        assert row["mean_length"] == 100
+    assert report["rows"][0]["success_rate"] == 1.0 and report["rows"][1]["success_rate"] == 0.0
+
+
+def test_plot_writes_a_png(tmp_path):
+    run = train(write_curriculum(tmp_path, total_steps=600), run_dir=tmp_path / "run", progress=False)
+    assert main(["plot", str(run)]) == 0
+    assert (run / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(
+    "args,fragment",
+    [
+        (["train", "missing.yaml"], "missing.yaml: no such file"),
+        (["train", "{bad}"], "no such file"),
+        (["eval", "nowhere"], "nowhere: no such run directory or checkpoint file"),
+        (["plot", "."], "no metrics.jsonl"),
+    ],
+)
+def test_bad_cli_input_is_one_line_and_exit_2(args, fragment, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0], err
+
+
+def test_unknown_agent_and_bad_yaml_in_curriculum(tmp_path, capsys):
+    cur = write_curriculum(tmp_path, agent="agents/nope.yaml")
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"error: {cur}: agent: file not found: {tmp_path / 'agents/nope.yaml'}"]
+    assert not (tmp_path / "run").exists()  # nothing written for bad input
+    cur = write_curriculum(tmp_path)
+    (tmp_path / "agent.yaml").write_text("name: [unclosed\n")
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
+    assert "agent.yaml: invalid YAML at line 2" in capsys.readouterr().err
+
+
+def test_resume_without_checkpoint_or_with_other_curriculum(tmp_path, capsys):
+    cur = write_curriculum(tmp_path, total_steps=200)
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run"), "--resume"]) == 2
+    assert "no checkpoint.pt to resume from" in capsys.readouterr().err
+    train(cur, run_dir=tmp_path / "run", progress=False)
+    other = write_curriculum(tmp_path, total_steps=200, promotion={"threshold": 0.5, "window": 4})
+    assert main(["train", str(other), "--run-dir", str(tmp_path / "run"), "--resume"]) == 2
+    assert "differs from the curriculum/agent of the run" in capsys.readouterr().err
