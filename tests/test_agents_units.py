@@ -305,12 +305,6 @@ def test_symmetric_spec_ignores_privileged_dim_and_asymmetric_spec_requires_it()
         PPOAgent(agent_spec(asymmetric_critic=True), OBS_SPACE, ACTION_SPACE)
 
 
-def test_lstm_needs_at_least_one_env_per_minibatch():
-    spec = agent_spec(policy={"type": "lstm"}, ppo={"num_envs": 2, "num_minibatches": 4})
-    with pytest.raises(ValueError, match="whole env sequences"):
-        PPOAgent(spec, OBS_SPACE, ACTION_SPACE)
-
-
 def test_set_progress_anneals_learning_rate_linearly():
     agent = PPOAgent(agent_spec(ppo={"learning_rate": 1e-3}), OBS_SPACE, ACTION_SPACE)
     agent.set_progress(0.25)

@@ -112,7 +112,7 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     deadline = time.time() + 60
-    while time.time() < deadline and len(read_jsonl(run / "metrics.jsonl")) < 2:
+    while time.time() < deadline and len(read_jsonl(run / "metrics.jsonl")) < 3:
         time.sleep(0.2)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)
@@ -120,7 +120,7 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
     assert "interrupted at step" in err and "Traceback" not in err
     saved = load_checkpoint(run / "checkpoint.pt")
     step = saved["agent"]["global_step"]
-    assert step >= 400
+    assert step >= 400  # at least the update before the last logged one was complete
     with open(run / "checkpoint.pt", "rb") as f:
         before = hashlib.sha256(f.read()).hexdigest()
     # a second plain `train` into the same dir refuses and leaves the checkpoint untouched

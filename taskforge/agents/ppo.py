@@ -126,12 +126,7 @@ class PPOAgent:
             raise ValueError(
                 "asymmetric_critic is set, so PPOAgent needs privileged_dim >= 1 (the length of info['privileged'])"
             )
-        ppo = spec.ppo
-        if spec.policy.type == "lstm" and ppo.num_minibatches > ppo.num_envs:
-            raise ValueError(
-                f"an LSTM policy trains on whole env sequences, so num_minibatches ({ppo.num_minibatches}) "
-                f"must be <= num_envs ({ppo.num_envs})"
-            )
+        ppo = spec.ppo  # AgentSpec already checks that an LSTM has at least one env per minibatch
         self.spec = spec
         self.seed = seed
         self.action_space = action_space
