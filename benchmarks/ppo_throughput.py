@@ -1,0 +1,148 @@
+"""Training throughput on pick-place-v3: taskforge PPO vs Stable-Baselines3 PPO with the same
+hyperparameters, and the raw simulator on the same core count, in one run.
+
+    python benchmarks/ppo_throughput.py [--updates 4] [--agent agents/ppo.yaml]
+
+Both learners train on the same env (taskforge's pick-place `place` stage, full randomisation),
+vectorised over `num_envs` worker processes, with the preset's rollout length, epochs, minibatch
+size and network (separate 256x256 tanh actor and critic), observation and reward normalisation,
+and one torch thread each. The first update is warm-up (process start, goal generation) and is
+not timed. "Raw sim" steps the bare Meta-World env with random actions in the same number of
+worker processes: the ceiling for any learner on this machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import print_table, versions, write_result  # noqa: E402
+from taskforge.agents import PPOAgent, make_vector_env  # noqa: E402
+from taskforge.envs import TaskEnv, load_task  # noqa: E402
+from taskforge.spec import load_agent_spec  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+TASK = ROOT / "tasks/metaworld/pick_place.yaml"
+
+
+def task_env(seed: int = 0) -> TaskEnv:
+    env = TaskEnv(load_task(TASK), TASK, stage="place", seed=seed)
+    return env
+
+
+def raw_env():
+    from metaworld.env_dict import ALL_V3_ENVIRONMENTS
+
+    from taskforge.backends.metaworld import ml1_goals
+
+    class Raw(ALL_V3_ENVIRONMENTS["pick-place-v3"]):
+        """Bare Meta-World with a random ML1 goal per episode, as gymnasium's vector env needs
+        (reset must accept seed/options)."""
+
+        def reset(self, *, seed=None, options=None):
+            train, _ = ml1_goals("pick-place-v3", 0)
+            rng = np.random.default_rng(seed)
+            self.set_task(train[int(rng.integers(len(train)))])
+            return super().reset()
+
+    return Raw()
+
+
+def time_taskforge(spec, updates: int) -> float:
+    envs = make_vector_env([partial(task_env, i) for i in range(spec.ppo.num_envs)], spec.runtime)
+    agent = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    agent.collect(envs)
+    agent.update()  # warm-up
+    start, steps = time.perf_counter(), agent.global_step
+    for _ in range(updates):
+        agent.collect(envs)
+        agent.update()
+    sps = (agent.global_step - steps) / (time.perf_counter() - start)
+    envs.close()
+    return sps
+
+
+def time_sb3(spec, updates: int) -> float:
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
+
+    ppo, policy = spec.ppo, spec.policy
+    venv = make_vec_env(task_env, n_envs=ppo.num_envs, vec_env_cls=SubprocVecEnv)
+    venv = VecNormalize(venv, norm_obs=ppo.norm_obs, norm_reward=ppo.norm_reward, gamma=ppo.gamma)
+    batch = ppo.num_envs * ppo.rollout_steps
+    model = PPO(
+        "MlpPolicy", venv, learning_rate=ppo.learning_rate, n_steps=ppo.rollout_steps,
+        batch_size=batch // ppo.num_minibatches, n_epochs=ppo.update_epochs, gamma=ppo.gamma,
+        gae_lambda=ppo.gae_lambda, clip_range=ppo.clip_coef, clip_range_vf=ppo.clip_coef if ppo.clip_vloss else None,
+        ent_coef=ppo.ent_coef, vf_coef=ppo.vf_coef, max_grad_norm=ppo.max_grad_norm, device="cpu", seed=0,
+        policy_kwargs={"net_arch": {"pi": list(policy.hidden_sizes), "vf": list(policy.hidden_sizes)},
+                       "activation_fn": torch.nn.Tanh, "log_std_init": policy.init_log_std},
+    )
+    model.learn(batch)  # warm-up
+    start = time.perf_counter()
+    model.learn(batch * updates, reset_num_timesteps=False)
+    sps = batch * updates / (time.perf_counter() - start)
+    venv.close()
+    return sps
+
+
+def time_raw(spec, updates: int) -> float:
+    from gymnasium.vector import AsyncVectorEnv
+
+    n, steps = spec.ppo.num_envs, spec.ppo.rollout_steps * (updates + 1)
+    envs = AsyncVectorEnv([raw_env] * n)
+    envs.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 4)).astype(np.float32)
+    envs.step(actions[0])
+    start = time.perf_counter()
+    for a in actions[1:]:
+        envs.step(a)
+    sps = (steps - 1) * n / (time.perf_counter() - start)
+    envs.close()
+    return sps
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--updates", type=int, default=4, help="timed PPO updates per learner")
+    parser.add_argument("--agent", default=str(ROOT / "agents/ppo.yaml"))
+    args = parser.parse_args()
+    spec = load_agent_spec(args.agent)
+    torch.set_num_threads(spec.runtime.torch_threads)
+
+    raw = time_raw(spec, args.updates)
+    ours = time_taskforge(spec, args.updates)
+    sb3 = time_sb3(spec, args.updates)
+    rows = [["raw Meta-World (random actions)", raw, "-"],
+            ["taskforge PPO", ours, f"{ours / raw:.2f} of raw"],
+            ["Stable-Baselines3 PPO", sb3, f"{sb3 / raw:.2f} of raw"]]
+    print_table(["learner", "steps/s", "vs raw"], rows)
+    print(f"taskforge / SB3 = {ours / sb3:.2f} (goal >= 2); taskforge / raw = {ours / raw:.2f} (goal >= 0.75)")
+    batch = spec.ppo.num_envs * spec.ppo.rollout_steps
+    path = write_result("ppo_throughput", {
+        "agent_preset": args.agent,
+        "workers": spec.ppo.num_envs,
+        "timed_steps_per_learner": batch * args.updates,
+        "torch_threads": spec.runtime.torch_threads,
+        "raw_steps_per_s": raw,
+        "taskforge_steps_per_s": ours,
+        "sb3_steps_per_s": sb3,
+        "taskforge_over_sb3": ours / sb3,
+        "taskforge_over_raw": ours / raw,
+        "goals": {"taskforge_over_sb3": ">= 2", "taskforge_over_raw": ">= 0.75"},
+        "versions": versions("torch", "stable-baselines3", "metaworld", "mujoco", "gymnasium"),
+    })
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()
