@@ -96,10 +96,8 @@ def time_sb3(spec, updates: int) -> float:
 
 
 def time_raw(spec, updates: int) -> float:
-    from gymnasium.vector import AsyncVectorEnv
-
     n, steps = spec.ppo.num_envs, spec.ppo.rollout_steps * (updates + 1)
-    envs = AsyncVectorEnv([raw_env] * n)
+    envs = make_vector_env([raw_env] * n, spec.runtime)  # the same vectorisation as the learner
     envs.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 4)).astype(np.float32)
     envs.step(actions[0])

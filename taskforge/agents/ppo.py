@@ -27,7 +27,7 @@ from torch import nn
 
 from taskforge.agents.normalization import ObservationNormalizer, RewardScaler
 from taskforge.agents.policies import ActorCritic, RecurrentState
-from taskforge.agents.runtime import check_same_step_autoreset
+from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
 from taskforge.agents.storage import Minibatch, RolloutBuffer
 from taskforge.spec.agent import AgentSpec, PPOSpec
 
@@ -275,6 +275,10 @@ class PPOAgent:
         minibatches run, plus `explained_variance`, `learning_rate` and `epochs`."""
         if not self._rollout_ready:
             raise RuntimeError("update() needs a fresh rollout: call collect() first")
+        with torch_threads(update_threads(self.spec.runtime)):  # the env workers idle meanwhile
+            return self._update()
+
+    def _update(self) -> dict[str, float]:
         ppo = self.spec.ppo
         totals: dict[str, float] = {}
         minibatches_run = 0

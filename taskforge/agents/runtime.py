@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import contextlib
+import os
+from collections.abc import Callable, Iterator, Sequence
 
 import gymnasium
 import torch
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv, VectorEnv
 
+from taskforge.agents.sharded import ShardedVectorEnv
 from taskforge.spec.agent import RuntimeSpec
 
 
@@ -20,6 +23,8 @@ def make_vector_env(env_fns: Sequence[Callable[[], gymnasium.Env]], runtime: Run
     `infos["final_info"]`), which is exactly what truncation bootstrapping needs. NEXT_STEP
     instead spends an extra step with a dummy action and reward 0 on the reset.
     """
+    if runtime.vector == "sharded":
+        return ShardedVectorEnv(env_fns, runtime.workers or os.cpu_count() or 1)
     vector_cls = AsyncVectorEnv if runtime.vector == "async" else SyncVectorEnv
     return vector_cls(env_fns, autoreset_mode=AutoresetMode.SAME_STEP)
 
@@ -39,3 +44,20 @@ def set_torch_threads(runtime: RuntimeSpec) -> None:
     """`torch.set_num_threads(runtime.torch_threads)`: small networks run fastest on one or two
     threads, and envs in other processes need the remaining cores."""
     torch.set_num_threads(runtime.torch_threads)
+
+
+def update_threads(runtime: RuntimeSpec) -> int:
+    """Torch threads for the PPO update: by default every core, since the env workers wait for
+    the new policy and their cores would otherwise idle."""
+    return runtime.update_threads or os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """Run a block with `n` torch threads, then restore the previous count."""
+    previous = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(previous)

@@ -63,9 +63,15 @@ class PPOSpec(StrictModel):
 
 
 class RuntimeSpec(StrictModel):
-    vector: Literal["async", "sync"] = "async"
-    """`async` runs each env in its own process (gymnasium AsyncVectorEnv)."""
+    vector: Literal["sharded", "async", "sync"] = "sharded"
+    """`sharded`: `workers` processes each stepping a slice of the envs (one round trip per core
+    per step); `async`: one process per env (gymnasium AsyncVectorEnv); `sync`: all in-process."""
+    workers: int | None = Field(default=None, ge=1, le=1024)
+    """Worker processes for `sharded`; default one per CPU core."""
     torch_threads: int = Field(default=1, ge=1, le=256)
+    """Torch threads while collecting: one, so the env workers keep the other cores."""
+    update_threads: int | None = Field(default=None, ge=1, le=256)
+    """Torch threads during the PPO update; default every core (the workers wait meanwhile)."""
 
 
 class AgentSpec(StrictModel):
