@@ -67,6 +67,10 @@ def load_curriculum(path: str | Path) -> ResolvedCurriculum:
                 msg = f"no stage '{stage}' in {task_file}; {expected_one_of(stage, task.stage_names)}"
                 issues.append(SpecIssue(str(path), f"phases[{i}].stages[{j}]", msg))
         phases.append(CurriculumPhase(task_file, task, list(phase.stages) or task.stage_names))
+        eval_stage = spec.evaluation.stage
+        if eval_stage is not None and eval_stage not in task.stage_names:
+            msg = f"no stage '{eval_stage}' in {task_file} (phase {i + 1}); {expected_one_of(eval_stage, task.stage_names)}"
+            issues.append(SpecIssue(str(path), "evaluation.stage", msg))
     if issues:
         raise SpecError(issues)
     return ResolvedCurriculum(path, spec, agent_file, agent, phases)

@@ -40,9 +40,14 @@ class SamplingSpec(StrictModel):
 
 
 class EvaluationSpec(StrictModel):
+    """Periodic deterministic evaluation during training (logged as `eval_*`)."""
+
     every_steps: int = Field(default=100_000, ge=1)
     episodes: int = Field(default=20, ge=1)
     split: Literal["train", "test"] = "test"
+    stage: str | None = None
+    """Evaluate this stage of the current phase (e.g. the final `place`, to compare a curriculum
+    with flat training); default: whichever stage the curriculum is on."""
 
 
 class CheckpointSpec(StrictModel):

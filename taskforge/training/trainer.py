@@ -187,7 +187,8 @@ def train(
 def _evaluate_current(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: CurriculumScheduler, seed: int):
     phase = cur.phases[scheduler.phase]
     ev = cur.spec.evaluation
-    return evaluate(agent, phase.task, phase.task_file, scheduler.stage, ev.split, ev.episodes, seed=seed + 10_000)
+    stage = ev.stage or scheduler.stage
+    return evaluate(agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=seed + 10_000)
 
 
 def _raise_keyboard_interrupt(signum, frame) -> None:
