@@ -4,6 +4,7 @@
 PYTHON ?= python3
 VENV   ?= .venv
 CURRICULUM ?= curricula/pick_place.yaml
+ARGS ?=
 
 $(VENV)/.installed: pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
@@ -14,7 +15,7 @@ $(VENV)/.installed: pyproject.toml constraints.txt
 setup: $(VENV)/.installed
 
 train: setup
-	$(VENV)/bin/taskforge train $(CURRICULUM)
+	$(VENV)/bin/taskforge train $(CURRICULUM) $(ARGS)
 
 test: setup
 	$(VENV)/bin/pytest -q
