@@ -18,12 +18,7 @@ from taskforge.agents import PPOAgent, make_vector_env, ppo_loss
 from taskforge.spec.agent import AgentSpec
 
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def agent_spec(**sections) -> AgentSpec:

@@ -33,12 +33,7 @@ OBS_SPACE = gymnasium.spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float32)
 ACTION_SPACE = gymnasium.spaces.Box(np.array([-2.0, 0.0], dtype=np.float32), np.array([1.0, 5.0], dtype=np.float32))
 
 
-@pytest.fixture(autouse=True)
-def one_torch_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def agent_spec(**sections) -> AgentSpec:
