@@ -174,3 +174,18 @@ def test_scripted_pick_place_grasps_lifts_and_places(pick_place_doc):
             placed = True
             break
     assert picked and placed and info["native_success"] == 1.0
+
+
+def test_ml1_goal_cache_on_disk_round_trips_and_survives_corruption(tmp_path, monkeypatch):
+    from taskforge.backends.metaworld import ml1_goals
+
+    monkeypatch.setenv("TASKFORGE_CACHE", str(tmp_path))
+    ml1_goals.cache_clear()
+    first = ml1_goals("reach-v3", 7)
+    (cached,) = tmp_path.glob("ml1-*-reach-v3-seed7.pkl")
+    ml1_goals.cache_clear()
+    assert [t.data for t in ml1_goals("reach-v3", 7)[1]] == [t.data for t in first[1]]
+    cached.write_bytes(b"torn")
+    ml1_goals.cache_clear()
+    assert [t.data for t in ml1_goals("reach-v3", 7)[0]] == [t.data for t in first[0]]
+    ml1_goals.cache_clear()

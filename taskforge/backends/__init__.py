@@ -14,7 +14,11 @@ from types import ModuleType
 from taskforge.backends.base import Backend, GoalOverride, Split
 from taskforge.spec import SpecIssue, TaskSpec
 
-_MODULES = {"metaworld": "taskforge.backends.metaworld", "gymnasium": "taskforge.backends.gymnasium_env"}
+_MODULES = {
+    "metaworld": "taskforge.backends.metaworld",
+    "gymnasium": "taskforge.backends.gymnasium_env",
+    "xarm7": "taskforge.backends.xarm7",
+}
 
 
 def _module(task: TaskSpec) -> ModuleType:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import functools
 import math
+import os
+import pickle
 from pathlib import Path
 
 import metaworld
@@ -36,9 +38,38 @@ _NEVER = 10**9  # Meta-World's own path limit, disabled: the env owns episode le
 
 @functools.lru_cache(maxsize=None)
 def ml1_goals(env_name: str, seed: int) -> tuple[tuple[Task, ...], tuple[Task, ...]]:
-    """ML1's (train, test) tasks; cached because generating them resets the env 100 times."""
+    """ML1's (train, test) tasks.
+
+    Generating them resets the env 100 times (~3.5 s per environment, ~35 s for MT10, paid again
+    in every worker process), so they are cached in memory and on disk under
+    `$TASKFORGE_CACHE` (default `~/.cache/taskforge`), keyed by environment, seed and
+    Meta-World version. A missing or unreadable cache file is simply regenerated.
+    """
+    path = _cache_dir() / f"ml1-{metaworld_version()}-{env_name}-seed{seed}.pkl"
+    try:
+        return pickle.loads(path.read_bytes())
+    except (OSError, pickle.UnpicklingError, EOFError, AttributeError):
+        pass
     benchmark = metaworld.ML1(env_name, seed=seed)
-    return tuple(benchmark.train_tasks), tuple(benchmark.test_tasks)
+    goals = tuple(benchmark.train_tasks), tuple(benchmark.test_tasks)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(pickle.dumps(goals))
+        os.replace(tmp, path)  # atomic: concurrent workers never read a torn file
+    except OSError:
+        pass  # a read-only home is fine: the goals are still in memory
+    return goals
+
+
+def _cache_dir() -> Path:
+    return Path(os.environ.get("TASKFORGE_CACHE", Path.home() / ".cache" / "taskforge"))
+
+
+def metaworld_version() -> str:
+    from importlib.metadata import version
+
+    return version("metaworld")
 
 
 class MetaWorldBackend:
@@ -129,6 +160,14 @@ class MetaWorldBackend:
         one_hot = np.zeros(len(self.task_names))
         one_hot[self._active_index] = 1.0
         return np.concatenate([obs, one_hot])
+
+    def native_observation(self) -> np.ndarray:
+        """Meta-World's own goal-observable observation after the last reset/step: 39 floats,
+        the true (possibly overridden) goal in `obs[36:39]`, no noise, no sub-task one-hot. What
+        Meta-World's scripted policies read (`taskforge.demos`); never what the agent sees."""
+        obs = self._obs.copy()
+        obs[_GOAL] = self._active._target_pos  # the env may have zeroed this slice in place
+        return obs
 
     def features(self) -> Features:
         # Runs every step: plain-float arithmetic on 3-vectors is several times faster than
