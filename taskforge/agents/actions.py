@@ -45,6 +45,10 @@ class ClipGaussian:
     def to_env(self, raw: torch.Tensor) -> torch.Tensor:
         return torch.clamp(raw, self.low, self.high)
 
+    def from_env(self, action: torch.Tensor) -> torch.Tensor:
+        """A raw sample that maps to `action` (itself, for an action inside the box)."""
+        return action
+
 
 class SquashGaussian:
     """`a = center + scale * tanh(u)`: every action inside the box, density corrected.
@@ -74,6 +78,11 @@ class SquashGaussian:
 
     def to_env(self, raw: torch.Tensor) -> torch.Tensor:
         return self.center + self.scale * torch.tanh(raw)
+
+    def from_env(self, action: torch.Tensor, bound: float = 0.999) -> torch.Tensor:
+        """`atanh` of the action in box units; actions on the bounds (common in demonstrations)
+        are pulled to `bound` first, where the inverse is finite."""
+        return torch.atanh(((action - self.center) / self.scale).clamp(-bound, bound))
 
 
 GaussianActions = ClipGaussian | SquashGaussian

@@ -105,7 +105,7 @@ from taskforge.backends.xarm7_scene import (
     required_names,
     robot_path,
 )
-from taskforge.spec import SpecError, SpecIssue, TaskSpec
+from taskforge.spec import SpecError, SpecIssue, TaskSpec, did_you_mean
 from taskforge.spec.task import GoalsSpec, XArm7BackendSpec
 from taskforge.terms import ENV_FEATURES, FEATURES, Features
 
@@ -194,6 +194,11 @@ class XArm7Backend:
         goal = entries.goals[index].copy()
         goal[2] += self._table
         return entries.objects[index].copy(), goal
+
+    @property
+    def cartesian_target(self) -> np.ndarray:
+        """The Cartesian controller's current TCP target (world, m); a copy."""
+        return self._target.copy()
 
     @property
     def ik_ms_per_step(self) -> float:
@@ -356,14 +361,13 @@ def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
         return [SpecIssue(file_s, "backend.robot_model", f"file not found: {path}")]
     try:
         model = build_scene(spec, load_robot(path))
-    except Exception as exc:  # MuJoCo's parse/compile errors: a broken or incompatible robot file
+    except ValueError as exc:  # MuJoCo's parse/compile errors: a broken or incompatible robot file
         msg = str(exc).strip().replace("\n", " ")
         return [SpecIssue(file_s, "backend.robot_model", f"MuJoCo could not load {path} into the scene: {msg}")]
     for field, kind, name in required_names(spec):
         if mujoco.mj_name2id(model, kind, name) < 0:
             what = kind.name[6:].lower()
-            known = _names(model, kind)
-            issues.append(SpecIssue(file_s, f"backend.{field}", f"{path.name} has no {what} '{name}'; its {what}s include {known}"))
+            issues.append(SpecIssue(file_s, f"backend.{field}", f"{path.name} has no {what} '{name}'; {_known(model, kind, name)}"))
     if not issues:
         grip = model.actuator(GRIPPER_ACTUATOR).id
         if model.actuator_biastype[grip] != mujoco.mjtBias.mjBIAS_AFFINE or model.actuator_biasprm[grip, 1] >= 0:
@@ -375,12 +379,20 @@ def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
     return issues
 
 
-def _names(model: mujoco.MjModel, kind: mujoco.mjtObj) -> str:
+def _known(model: mujoco.MjModel, kind: mujoco.mjtObj, name: str) -> str:
+    """The model's names of that kind: a close match first, then (for geoms, of which a robot
+    has many) those that look like finger pads, else the first 200 characters of them all."""
     count = {mujoco.mjtObj.mjOBJ_JOINT: model.njnt, mujoco.mjtObj.mjOBJ_ACTUATOR: model.nu,
              mujoco.mjtObj.mjOBJ_SITE: model.nsite, mujoco.mjtObj.mjOBJ_GEOM: model.ngeom}[kind]
     names = [n for n in (mujoco.mj_id2name(model, kind, i) for i in range(count)) if n]
+    what = kind.name[6:].lower()
+    if kind == mujoco.mjtObj.mjOBJ_GEOM:
+        pads = [n for n in names if "pad" in n or "finger" in n]
+        if pads:
+            return f"geoms named like finger pads: {', '.join(pads)}{did_you_mean(name, names)}"
     text = ", ".join(names)
-    return text if len(text) <= 200 else text[:200].rsplit(", ", 1)[0] + ", ..."
+    text = text if len(text) <= 200 else text[:200].rsplit(", ", 1)[0] + ", ..."
+    return f"its {what}s include {text}{did_you_mean(name, names)}"
 
 
 def create(task: TaskSpec, file: str | Path) -> XArm7Backend:

@@ -32,6 +32,11 @@ GOAL_BODY = "goal"
 # The table spans x in [-0.45, 1.05], y in [-0.7, 0.7] (as in scene.xml); the room floor is 0.75 m
 # below the default table top.
 _TABLE_X, _TABLE_Y, _FLOOR_Z = (-0.45, 1.05), (-0.7, 0.7), -0.75
+_CAMERAS = (  # name, position, xyaxes: those of scene.xml, looking at the workspace around x = 0.45
+    ("front", [1.35, 0, 0.55], [0, 1, 0, -0.447, 0, 0.894]),
+    ("top", [0.45, 0, 1.4], [0, -1, 0, 1, 0, 0]),
+    ("side", [0.45, -1.1, 0.45], [1, 0, 0, 0, 0.303, 0.953]),
+)
 
 
 def robot_path(spec: XArm7BackendSpec, task_file: str | Path) -> Path:
@@ -122,18 +127,11 @@ def build_scene(spec: XArm7BackendSpec, robot: mujoco.MjSpec) -> mujoco.MjModel:
     goal = w.add_body(name=GOAL_BODY, mocap=True, pos=[x0, y0, top + 0.15])
     goal.add_site(name=GOAL_BODY, type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.02, 0, 0], material="goal", group=0)
 
-    w.add_camera(name="front", pos=[1.35, 0, 0.55], fovy=45,
-                 alt=_xyaxes([0, 1, 0], [-0.447, 0, 0.894]))
-    w.add_camera(name="top", pos=[0.45, 0, 1.4], fovy=45, alt=_xyaxes([0, -1, 0], [1, 0, 0]))
-    w.add_camera(name="side", pos=[0.45, -1.1, 0.45], fovy=45, alt=_xyaxes([1, 0, 0], [0, 0.303, 0.953]))
+    for name, pos, xyaxes in _CAMERAS:
+        camera = w.add_camera(name=name, pos=pos, fovy=45)
+        camera.alt.type = mujoco.mjtOrientation.mjORIENTATION_XYAXES
+        camera.alt.xyaxes = xyaxes
     return s.compile()
-
-
-def _xyaxes(x, y) -> mujoco.MjsOrientation:
-    o = mujoco.MjsOrientation()
-    o.type = mujoco.mjtOrientation.mjORIENTATION_XYAXES
-    o.xyaxes = [*x, *y]
-    return o
 
 
 def _set_gravcomp(body: mujoco.MjsBody) -> None:

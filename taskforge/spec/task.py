@@ -80,9 +80,9 @@ class XArm7WorkspaceSpec(StrictModel):
     """Box that the Cartesian TCP target is clamped to. x, y in world metres; z in metres
     **above the table top** (so it follows `table_height`)."""
 
-    x: Interval = (0.15, 0.70)
-    y: Interval = (-0.40, 0.40)
-    z: Interval = (0.005, 0.45)
+    x: Interval = (0.20, 0.65)
+    y: Interval = (-0.35, 0.35)
+    z: Interval = (0.005, 0.40)
 
     @model_validator(mode="after")
     def _ordered(self) -> "XArm7WorkspaceSpec":
@@ -121,7 +121,7 @@ class XArm7ControlSpec(StrictModel):
     against the table or a stuck object does not wind the target up."""
     workspace: XArm7WorkspaceSpec = XArm7WorkspaceSpec()
     """Cartesian: box the TCP target is clamped to."""
-    ik_iterations: int = Field(default=3, ge=1, le=100)
+    ik_iterations: int = Field(default=2, ge=1, le=100)
     """Cartesian: at most this many mink IK iterations per control step (warm-started from the
     previous solution; stops early once within `ik_tolerance_m`)."""
     ik_tolerance_m: float = Field(default=1e-4, gt=0.0, le=0.01)
@@ -132,7 +132,7 @@ class XArm7ControlSpec(StrictModel):
     and the QP's damping)."""
     orientation_cost: float = Field(default=1.0, ge=0.0, le=100.0)
     """Cartesian: weight of the 'pointing straight down' orientation relative to position (1)."""
-    posture_cost: float = Field(default=1e-2, ge=0.0, le=10.0)
+    posture_cost: float = Field(default=1e-3, ge=0.0, le=10.0)
     """Cartesian: weight of the posture task that pulls the redundant joint towards `home`."""
     joint_targets: Literal["delta", "absolute"] = "delta"
     """Joint mode: `delta`: target += a * max_joint_step_rad (action 0 holds still);
@@ -263,8 +263,11 @@ class XArm7BackendSpec(StrictModel):
     @property
     def env(self) -> str:
         """A one-line description, shown where summaries show other backends' `env`."""
-        model = self.robot_model or "built-in model"
-        return f"xarm7 ({model}, {self.control.mode} control at {self.control.frequency_hz:g} Hz)"
+        model = self.robot_model or "built-in robot"
+        return (
+            f"{model}, {self.control.mode} control at {self.control.frequency_hz:g} Hz, table top z={self.table_height:g}, "
+            f"cube {200 * self.cube.size:g} cm {self.cube.mass:g} kg"
+        )
 
 
 BackendSpec = Annotated[

@@ -137,7 +137,9 @@ def train(
                 logger.event(asdict(event))
                 bar.write(f"[{event.step:,}] {event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f})")
 
-            current = [s for s, st in zip(episodes.successes, episodes.stages) if st == scheduler.stage]
+            per_stage: dict[str, list[bool]] = {}
+            for success, stage in zip(episodes.successes, episodes.stages):
+                per_stage.setdefault(stage, []).append(success)
             record: dict[str, Any] = {
                 "phase": scheduler.phase,
                 "stage": scheduler.stage,
@@ -146,6 +148,7 @@ def train(
                 "return_mean": float(np.mean(episodes.returns)) if episodes.returns else None,
                 "length_mean": float(np.mean(episodes.lengths)) if episodes.lengths else None,
                 "success_rate": float(np.mean(episodes.successes)) if episodes.successes else None,
+                **{f"success/{stage}": float(np.mean(v)) for stage, v in per_stage.items()},
                 **{f"window_success/{k}": v for k, v in scheduler.success_rates().items()},
                 **losses,
             }

@@ -1,0 +1,152 @@
+"""Warm start from demonstrations: behaviour cloning of the actor and value regression of the
+critic, before PPO fine-tunes (with the decaying BC term of `PPOAgent.set_demo_regularizer`,
+after DAPG, Rajeswaran et al. 2018).
+
+Choices, and why:
+
+* **BC loss: mean squared error between the policy's mean action and the demo action**, not
+  the log-likelihood. The Gaussian's log-std is state-independent and learnable; maximising the
+  likelihood of (nearly deterministic) scripted actions drives it towards the demos' tiny
+  residual, so PPO would start with almost no exploration, and the likelihood's gradient on the
+  mean is scaled by 1/σ², which ties the effective learning rate to that collapsing σ. MSE
+  trains the mean only and leaves the preset's `init_log_std`. The mean is compared in env
+  units: as it is for `clip` (demo actions lie inside the box, so the unclipped mean is pulled
+  inside too), through `tanh` for `squash`.
+* **Observation normalisation**: the agent's normaliser is updated with the demo observations
+  *before* pretraining, so the networks are fitted on exactly the input scale PPO will feed
+  them; PPO's rollouts then keep updating the same statistics.
+* **Value targets** are discounted returns-to-go of the demo rewards, in the units PPO's critic
+  learns: the rewards go through the agent's reward scaler first (which also updates its
+  statistics), then `gamma` discounts them. Episodes that ended by the time limit are
+  bootstrapped as if their last reward went on (`r_T / (1 - gamma)`), matching PPO's own
+  bootstrapping of truncation; terminated episodes end at zero.
+* **Asymmetric critic**: it reads `concat(obs, privileged)`; demos recorded by `taskforge demos`
+  carry `info["privileged"]` (zero-padded to the agent's width, like the env does). Without it,
+  or with a wider vector than the agent's, the critic is not pretrained (PPO fits it as usual).
+* **Recurrent (LSTM) policies are not supported**: behaviour cloning would have to run whole
+  episodes as sequences, for the pretraining and the regulariser alike. `pretrain` and
+  `set_demo_regularizer` raise a `ValueError` for them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from taskforge.agents.actions import SquashGaussian
+from taskforge.agents.normalization import RewardScaler
+from taskforge.agents.ppo import PPOAgent
+from taskforge.agents.runtime import torch_threads, update_threads
+
+
+def check_supported(agent: PPOAgent) -> None:
+    if agent.policy.recurrent:
+        raise ValueError("warm start from demonstrations supports MLP policies only (policy.type: mlp), not an LSTM")
+
+
+def returns_to_go(rewards: np.ndarray, episode_starts: np.ndarray, truncated: np.ndarray, gamma: float) -> np.ndarray:
+    """Discounted returns-to-go of concatenated episodes; a truncated episode's tail is
+    bootstrapped with `r_last / (1 - gamma)` (see the module doc)."""
+    rewards = np.asarray(rewards, dtype=np.float64)
+    out = np.zeros_like(rewards)
+    running = 0.0
+    for t in range(len(rewards) - 1, -1, -1):
+        last = t == len(rewards) - 1 or episode_starts[t + 1]
+        if last:
+            running = rewards[t] / (1.0 - gamma) if truncated[t] else rewards[t]
+        else:
+            running = rewards[t] + gamma * running
+        out[t] = running
+    return out
+
+
+def scaled_rewards(agent: PPOAgent, rewards: np.ndarray, episode_starts: np.ndarray, terminated: np.ndarray) -> np.ndarray:
+    """The demo rewards as PPO's critic sees them. Each episode is fed through a reward scaler
+    that shares the agent's statistics (so they now include the demos, as if collected), then
+    all rewards are divided by the final scale."""
+    scaler = agent.reward_scaler
+    if not scaler.enabled:
+        return np.asarray(rewards, dtype=np.float64)
+    feeder = RewardScaler(1, scaler.gamma, True, scaler.clip, scaler.epsilon)
+    feeder.rms = scaler.rms  # the same object: updates land in the agent's statistics
+    ends = np.append(np.asarray(episode_starts[1:], dtype=bool), True)
+    for r, end, term in zip(rewards, ends, terminated):
+        feeder(np.array([r]), np.array([bool(term)]), np.array([bool(end and not term)]))
+    scale = float(torch.sqrt(scaler.rms.var + scaler.epsilon))
+    return np.clip(np.asarray(rewards, dtype=np.float64) / scale, -scaler.clip, scaler.clip)
+
+
+def pretrain(
+    agent: PPOAgent,
+    observations: np.ndarray,
+    actions: np.ndarray,
+    returns_to_go: np.ndarray | None = None,
+    epochs: int = 50,
+    batch_size: int = 256,
+    learning_rate: float = 1e-3,
+    privileged: np.ndarray | None = None,
+) -> dict[str, float]:
+    """Behaviour cloning of the actor (MSE of the mean action) and, given `returns_to_go` (in
+    the critic's units, see `scaled_rewards`), value regression of the critic.
+
+    Updates the agent's observation normaliser with `observations` first. Shuffles with the
+    agent's generator, so a seed fixes the result. Returns `bc_action_mse_before/after` and,
+    when the critic was trained, `bc_value_mse_before/after`, plus `bc_samples`, `bc_epochs`.
+    """
+    check_supported(agent)
+    obs = np.asarray(observations, dtype=np.float32)
+    act = torch.as_tensor(np.asarray(actions, dtype=np.float32))
+    if obs.ndim != 2 or obs.shape[1] != agent.obs_normalizer.rms.mean.shape[0]:
+        raise ValueError(f"demo observations have shape {obs.shape}, the agent expects [n, {agent.obs_normalizer.rms.mean.shape[0]}]")
+    if act.shape != (len(obs), agent.action_space.shape[0]):
+        raise ValueError(f"demo actions have shape {tuple(act.shape)}, expected ({len(obs)}, {agent.action_space.shape[0]})")
+    policy = agent.policy
+    obs_n = agent.obs_normalizer(obs, update=True)  # PPO will see this scale too (module doc)
+    critic_in = _critic_input(agent, obs_n, privileged) if returns_to_go is not None else None
+    targets = None if critic_in is None else torch.as_tensor(np.asarray(returns_to_go), dtype=torch.float32)
+
+    def action_error(idx: torch.Tensor | slice) -> torch.Tensor:
+        dist, _ = policy.distribution(obs_n[idx][None], None, torch.zeros((1, len(obs_n[idx])), dtype=torch.bool))
+        mean = dist.mean[0]
+        predicted = policy.actions.to_env(mean) if isinstance(policy.actions, SquashGaussian) else mean
+        return ((predicted - act[idx]) ** 2).mean()
+
+    def value_error(idx: torch.Tensor | slice) -> torch.Tensor:
+        values, _ = policy.value(critic_in[idx][None], None, torch.zeros((1, len(critic_in[idx])), dtype=torch.bool))
+        return ((values[0] - targets[idx]) ** 2).mean()
+
+    params = [p for name, p in policy.named_parameters() if name != "actor_logstd"]
+    optimizer = torch.optim.Adam(params, lr=learning_rate, eps=1e-5)
+    metrics: dict[str, float] = {"bc_samples": float(len(obs)), "bc_epochs": float(epochs)}
+    with torch_threads(update_threads(agent.spec.runtime)):
+        with torch.no_grad():
+            metrics["bc_action_mse_before"] = action_error(slice(None)).item()
+            if targets is not None:
+                metrics["bc_value_mse_before"] = value_error(slice(None)).item()
+        for _ in range(epochs):
+            for idx in torch.randperm(len(obs), generator=agent.generator).split(batch_size):
+                loss = action_error(idx)
+                if targets is not None:
+                    loss = loss + value_error(idx)  # separate networks: the sum trains each on its own loss
+                optimizer.zero_grad()
+                loss.backward()
+                nn.utils.clip_grad_norm_(params, agent.spec.ppo.max_grad_norm)
+                optimizer.step()
+        with torch.no_grad():
+            metrics["bc_action_mse"] = action_error(slice(None)).item()
+            if targets is not None:
+                metrics["bc_value_mse"] = value_error(slice(None)).item()
+    return metrics
+
+
+def _critic_input(agent: PPOAgent, obs_n: torch.Tensor, privileged: np.ndarray | None) -> torch.Tensor | None:
+    """The critic's input for the demos, or None when it cannot be built (module doc)."""
+    width = agent.privileged_dim
+    if width == 0:
+        return obs_n
+    if privileged is None or privileged.shape[1] > width:
+        return None
+    padded = np.zeros((len(privileged), width), dtype=np.float32)
+    padded[:, : privileged.shape[1]] = privileged
+    return torch.cat([obs_n, agent.privileged_normalizer(padded, update=True)], dim=-1)

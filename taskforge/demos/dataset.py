@@ -1,0 +1,249 @@
+"""Recording demonstrations through a `TaskEnv`, and the `.npz` files that hold them.
+
+What is stored is what the agent will train on: per step, the observation the *agent* sees
+(observation noise and goal hiding included; the scripted policy itself acts on the true state)
+and the action in the agent's action space (clipped to the env's box, before the env's action
+noise and latency), plus the reward of the stage, its success flag, and the episode boundaries.
+
+File layout (`np.savez_compressed`; `load` checks it):
+
+| key | shape | meaning |
+|---|---|---|
+| `observations` | `[N, obs]` float32 | agent observation before each action |
+| `actions` | `[N, act]` float32 | the action taken, in `[-1, 1]` |
+| `rewards` | `[N]` float32 | the stage's reward for that step |
+| `successes` | `[N]` bool | the stage's success condition after that step |
+| `episode_starts` | `[N]` bool | first step of an episode |
+| `terminated`, `truncated` | `[N]` bool | how the episode ended (on its last step) |
+| `privileged` | `[N, p]` float32 | `info["privileged"]` before each action (an asymmetric critic's extra input); absent when not recorded |
+| `episode_lengths`, `episode_success`, `goal_indices` | `[E]` | per episode kept |
+| `metadata` | 0-d str | JSON: task file and name, stage, split, seed, policy, success rate, taskforge version, ... |
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from taskforge.demos.policies import ScriptedPolicy, Source, scripted_policy
+from taskforge.envs import TaskEnv, make
+from taskforge.spec import SpecError
+
+STEP_KEYS = ("observations", "actions", "rewards", "successes", "episode_starts", "terminated", "truncated")
+EPISODE_KEYS = ("episode_lengths", "episode_success", "goal_indices")
+
+
+@dataclass
+class Demos:
+    """A set of recorded episodes, steps concatenated in order (see the module doc)."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    rewards: np.ndarray
+    successes: np.ndarray
+    episode_starts: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+    episode_lengths: np.ndarray
+    episode_success: np.ndarray
+    goal_indices: np.ndarray
+    privileged: np.ndarray | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def num_steps(self) -> int:
+        return len(self.actions)
+
+    @property
+    def num_episodes(self) -> int:
+        return len(self.episode_lengths)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        out = {k: getattr(self, k) for k in (*STEP_KEYS, *EPISODE_KEYS)}
+        if self.privileged is not None:
+            out["privileged"] = self.privileged
+        return out
+
+
+def record(
+    env: TaskEnv,
+    policy: ScriptedPolicy | None = None,
+    episodes: int = 10,
+    seed: int = 0,
+    keep_failed: bool = False,
+    progress: bool = False,
+) -> Demos:
+    """Run `episodes` episodes of the env's current stage with a scripted policy (default:
+    `scripted_policy(env)`) and keep the successful ones (all with `keep_failed`).
+
+    Episode k resets with `seed + k` on goal `(seed + k) mod number-of-goals` of the env's split,
+    so a seed fixes the whole dataset and consecutive episodes visit different goals. An episode
+    counts as successful when the stage's condition held at some step (`episode_success`).
+    """
+    if episodes < 1:
+        raise ValueError(f"episodes must be >= 1 (got {episodes})")
+    stage = env.stage
+    policy = policy or scripted_policy(env, stage)
+    num_goals = env.backend.num_goals(env.split)
+    low, high = env.action_space.low, env.action_space.high
+    steps: dict[str, list] = {k: [] for k in (*STEP_KEYS, "privileged")}
+    kept: dict[str, list] = {k: [] for k in EPISODE_KEYS}
+    successes = 0
+    bar = _progress_bar(episodes, f"{env.task.name}:{stage}", progress)
+    for k in range(episodes):
+        goal_index = (seed + k) % num_goals
+        obs, info = env.reset(seed=seed + k, options={"stage": stage, "goal_index": goal_index})
+        policy.reset(env)
+        episode: dict[str, list] = {key: [] for key in steps}
+        while True:
+            action = np.clip(np.asarray(policy(env), dtype=np.float32), low, high)
+            episode["observations"].append(obs)
+            episode["privileged"].append(info.get("privileged"))
+            obs, reward, terminated, truncated, info = env.step(action)
+            episode["actions"].append(action)
+            episode["rewards"].append(reward)
+            episode["successes"].append(info["success"])
+            episode["terminated"].append(terminated)
+            episode["truncated"].append(truncated)
+            if terminated or truncated:
+                break
+        success = bool(info["episode_success"])
+        successes += success
+        if success or keep_failed:
+            length = len(episode["actions"])
+            episode["episode_starts"] = [True] + [False] * (length - 1)
+            for key in steps:
+                steps[key] += episode[key]
+            kept["episode_lengths"].append(length)
+            kept["episode_success"].append(success)
+            kept["goal_indices"].append(goal_index)
+        if bar is not None:
+            bar.set_postfix_str(f"success {successes}/{k + 1} ({successes / (k + 1):.0%})", refresh=False)
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    privileged = None
+    if steps["privileged"] and steps["privileged"][0] is not None:
+        privileged = np.asarray(steps["privileged"], dtype=np.float32)
+    import taskforge
+
+    metadata = {
+        "format": "taskforge-demos/1",
+        "taskforge_version": taskforge.__version__,
+        "task_file": env.file,
+        "task": env.task.name,
+        "backend": env.task.backend.type,
+        "stage": stage,
+        "split": env.split,
+        "seed": seed,
+        "policy": getattr(policy, "name", type(policy).__name__),
+        "episodes_run": episodes,
+        "episodes_kept": len(kept["episode_lengths"]),
+        "successes": successes,
+        "success_rate": successes / episodes,
+        "keep_failed": keep_failed,
+        "observation_size": obs_dim,
+        "action_size": act_dim,
+        "goal_hidden": not env.task.goals.observable,
+        "max_episode_steps": env.max_episode_steps,
+    }
+    return Demos(
+        observations=np.asarray(steps["observations"], dtype=np.float32).reshape(-1, obs_dim),
+        actions=np.asarray(steps["actions"], dtype=np.float32).reshape(-1, act_dim),
+        rewards=np.asarray(steps["rewards"], dtype=np.float32),
+        successes=np.asarray(steps["successes"], dtype=bool),
+        episode_starts=np.asarray(steps["episode_starts"], dtype=bool),
+        terminated=np.asarray(steps["terminated"], dtype=bool),
+        truncated=np.asarray(steps["truncated"], dtype=bool),
+        episode_lengths=np.asarray(kept["episode_lengths"], dtype=np.int64),
+        episode_success=np.asarray(kept["episode_success"], dtype=bool),
+        goal_indices=np.asarray(kept["goal_indices"], dtype=np.int64),
+        privileged=privileged,
+        metadata=metadata,
+    )
+
+
+def generate(
+    task_file: str | Path,
+    stage: str | None = None,
+    episodes: int = 10,
+    seed: int = 0,
+    split: str = "train",
+    keep_failed: bool = False,
+    source: Source = "auto",
+    progress: bool = False,
+) -> Demos:
+    """Load a task file and `record` scripted demonstrations of one stage (default: the last).
+
+    The env is built with `privileged=True`, so the demos carry `info["privileged"]` for an
+    asymmetric critic. Raises `SpecError` for a bad task file, stage or split."""
+    from taskforge.envs import load_task
+
+    task = load_task(task_file)
+    stage = stage or task.stages[-1].name
+    env = make(task_file, stage=stage, split=split, privileged=True)  # type: ignore[arg-type]
+    try:
+        return record(env, scripted_policy(env, stage, source), episodes, seed, keep_failed, progress)
+    finally:
+        env.close()
+
+
+def save(demos: Demos, path: str | Path) -> Path:
+    """Write atomically: a temp file in the same folder, fsync, then `os.replace`, so a kill
+    leaves the old file or the new one, never a torn one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez_compressed(f, **demos.arrays(), metadata=np.array(json.dumps(demos.metadata)))
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def load(path: str | Path) -> Demos:
+    """Read a demos file; a missing, unreadable or malformed file is a `SpecError`."""
+    path = Path(path)
+    if not path.is_file():
+        raise SpecError.single(path, "", "no such file; expected a demos .npz (taskforge demos TASK.yaml --out ...)")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError) as exc:
+        raise SpecError.single(path, "", f"not a readable .npz file ({exc})") from None
+    missing = [k for k in (*STEP_KEYS, *EPISODE_KEYS, "metadata") if k not in arrays]
+    if missing:
+        raise SpecError.single(path, "", f"not a taskforge demos file: missing {', '.join(missing)}")
+    n = len(arrays["actions"])
+    if any(len(arrays[k]) != n for k in STEP_KEYS) or int(arrays["episode_lengths"].sum()) != n:
+        raise SpecError.single(path, "", "inconsistent demos file: per-step arrays and episode lengths disagree")
+    if n == 0:
+        raise SpecError.single(path, "", "holds no steps (every episode failed?); record it again, or with --keep-failed")
+    return Demos(
+        **{k: arrays[k] for k in (*STEP_KEYS, *EPISODE_KEYS)},
+        privileged=arrays.get("privileged"),
+        metadata=json.loads(str(arrays["metadata"])),
+    )
+
+
+def _progress_bar(total: int, desc: str, enabled: bool):
+    if not enabled:
+        return None
+    import sys
+
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="episode", file=sys.stderr, dynamic_ncols=True)

@@ -1,0 +1,306 @@
+"""Scripted policies that produce demonstrations, chosen per backend and per stage.
+
+Two kinds:
+
+* **Native**: a simulator suite's own scripted policy for its full task. For Meta-World, the
+  policy of `metaworld.policies.ENV_POLICY_MAP[env]`. Those read Meta-World's goal-*observable*
+  39-float observation, so they are fed `backend.native_observation()` (true goal, no noise),
+  never the agent's observation (goal possibly hidden, noise added). The action they return is
+  the agent's action (the env passes actions straight to Meta-World).
+* **Waypoint planner** (`WaypointPlanner`): a closed-loop, stateless planner on the shared
+  features (`tcp_pos`, `object_pos`, `goal_pos`, `gripper_opening`, `object_height`) that emits
+  4-D Cartesian actions `(dx, dy, dz, grip)`. Every step it re-decides where the tool should go
+  from the current features, so it copes with the task's randomisation (object and goal
+  placement, masses, friction, latency, action noise) without any state to get out of sync.
+  Behaviours: `reach_object`, `reach_goal`, `push`, `pick`, `place`.
+
+`scripted_policy(env, stage)` picks one: the native policy for a task's *last* stage (by
+convention the full task; earlier stages are easier versions of it) when the backend has one,
+otherwise the planner with a behaviour inferred from the stage's success condition.
+
+Conventions (Meta-World's, checked in `SawyerXYZEnv.step`: the gripper actuators get
+`(a[3], -a[3])` and its pick-place policy closes with `+1`): `dx, dy, dz` in `[-1, 1]` move the
+tool by `action * gain_scale` metres per step; `grip` is **-1 open, +1 close**.
+
+Adding a backend: a backend whose action is also a Cartesian delta + gripper reuses the planner
+by registering its numbers, e.g. in its own module
+
+    from taskforge.demos.policies import PlannerConfig, register_backend
+    register_backend("xarm7", planner=PlannerConfig(gain=20.0, grip_open=-1.0, grip_close=1.0))
+
+and may pass `native=` a factory `(env, stage) -> ScriptedPolicy | None` for its own scripted
+policies. A backend with another action space (joint targets) needs its own `native` factory
+(e.g. IK on the planner's Cartesian waypoints); `scripted_policy` refuses backends with neither.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal, Protocol
+
+import numpy as np
+
+from taskforge.spec import SpecError, expected_one_of
+
+if TYPE_CHECKING:
+    from taskforge.envs import TaskEnv
+
+Behaviour = Literal["reach_object", "reach_goal", "push", "pick", "place"]
+BEHAVIOURS: tuple[Behaviour, ...] = ("reach_object", "reach_goal", "push", "pick", "place")
+Source = Literal["auto", "native", "planner"]
+
+
+class ScriptedPolicy(Protocol):
+    """Acts on a `TaskEnv` from its true state (features or the backend's raw observation)."""
+
+    name: str
+
+    def reset(self, env: TaskEnv) -> None:
+        """Called after every `env.reset()`."""
+
+    def __call__(self, env: TaskEnv) -> np.ndarray:
+        """The next action, in the env's action space."""
+
+
+# ------------------------------------------------------------------------------ the planner
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """A backend's numbers for `WaypointPlanner` (defaults: Meta-World's Sawyer)."""
+
+    gain: float = 10.0
+    """Action per metre of position error (Meta-World moves the hand 1 cm per unit action, so 10
+    reaches full speed 10 cm away, as Meta-World's own policies)."""
+    grip_open: float = -1.0
+    grip_close: float = 1.0
+    hover: float = 0.08
+    """Height (m) above the object at which the tool travels before descending onto it."""
+    xy_tolerance: float = 0.012
+    """Horizontal error (m) under which the tool is 'above' its target and may descend."""
+    grasp_height: float = 0.0
+    """Tool height (m) relative to the object's centre when closing the fingers."""
+    closed_below: float = 0.75
+    """`gripper_opening` under which the fingers count as closed on the object."""
+    lift: float = 0.10
+    """Height (m) above the object's resting height to lift it to (`pick`)."""
+    push_contact: float = 0.035
+    """Distance (m) from the object's centre to the tool's centre when the closed fingers touch
+    it (Meta-World's puck: measured 0.031-0.035 from every side)."""
+    push_height: float = -0.01
+    """Tool height (m) relative to the object's centre while pushing: low, so the push does not
+    tip the object over (a tipped puck rolls away)."""
+    push_lead: float = 0.02
+    """How far (m) ahead of the contact point the tool aims while pushing: sets the push speed
+    (`gain * push_lead` per step), slow enough that the object does not slide past the goal."""
+    push_lateral_tolerance: float = 0.025
+    """Sideways error (m) behind the object beyond which the tool goes back around it."""
+    push_done: float = 0.01
+    """Object-to-goal distance (m) at which a push stops."""
+    release_height: float = 0.02
+    """`place` opens the fingers at the goal only when the goal is this close (m) above the
+    object's resting height (a goal on the table); goals in the air are held."""
+
+
+class WaypointPlanner:
+    """Cartesian waypoints from the shared features; see the module doc."""
+
+    def __init__(self, behaviour: Behaviour, config: PlannerConfig = PlannerConfig()):
+        if behaviour not in BEHAVIOURS:
+            raise ValueError(f"unknown behaviour {behaviour!r}; expected one of {', '.join(BEHAVIOURS)}")
+        self.behaviour = behaviour
+        self.config = config
+        self.name = f"planner:{behaviour}"
+
+    def reset(self, env: TaskEnv) -> None:
+        pass  # stateless: every step decides from the current features
+
+    def __call__(self, env: TaskEnv) -> np.ndarray:
+        f = env.features()
+        tcp = np.asarray(f["tcp_pos"], dtype=float)
+        obj = np.asarray(f.get("object_pos", tcp), dtype=float)
+        goal = np.asarray(f.get("goal_pos", tcp), dtype=float)
+        target, grip = getattr(self, f"_{self.behaviour}")(f, tcp, obj, goal)
+        return self._action(tcp, target, grip)
+
+    def _action(self, tcp: np.ndarray, target: np.ndarray, grip: float) -> np.ndarray:
+        delta = self.config.gain * (target - tcp)
+        largest = np.abs(delta).max()
+        if largest > 1.0:  # scale, not clip per axis, so the tool moves straight at the target
+            delta /= largest
+        return np.append(delta, grip).astype(np.float32)
+
+    # -- behaviours: each returns (tool target, grip command) --------------------------------
+
+    def _reach_goal(self, f, tcp, obj, goal):
+        return goal, self.config.grip_open
+
+    def _reach_object(self, f, tcp, obj, goal):
+        c = self.config
+        if _xy_dist(tcp, obj) > c.xy_tolerance:  # from above, so the fingers do not knock it away
+            return obj + [0.0, 0.0, max(c.hover / 2, tcp[2] - obj[2])], c.grip_open
+        return obj, c.grip_open
+
+    def _pick(self, f, tcp, obj, goal, carry_to: np.ndarray | None = None):
+        c = self.config
+        rest_z = obj[2] - float(f.get("object_height", 0.0))
+        lifted = obj[2] - rest_z > 0.01
+        holding = float(f["gripper_opening"]) < c.closed_below and np.linalg.norm(tcp - obj) < 0.04
+        if holding and (lifted or _xy_dist(tcp, obj) < c.xy_tolerance):
+            if carry_to is None:
+                carry_to = np.array([obj[0], obj[1], rest_z + c.lift])
+            return tcp + (carry_to - obj), c.grip_close  # move the object, not the tool, to the target
+        if _xy_dist(tcp, obj) > c.xy_tolerance:
+            return obj + [0.0, 0.0, c.hover], c.grip_open  # pre-grasp, above the object
+        if tcp[2] - (obj[2] + c.grasp_height) > 0.008:
+            return obj + [0.0, 0.0, c.grasp_height], c.grip_open  # descend, fingers open
+        return obj + [0.0, 0.0, c.grasp_height], c.grip_close  # close; wait until closed
+
+    def _place(self, f, tcp, obj, goal):
+        c = self.config
+        rest_z = obj[2] - float(f.get("object_height", 0.0))
+        on_table = goal[2] - rest_z < c.release_height
+        if on_table and np.linalg.norm(obj - goal) < 0.02:
+            return tcp + [0.0, 0.0, 0.05], c.grip_open  # release and back off upwards
+        # carry high enough to clear the table, then over the goal, then down to it
+        if _xy_dist(obj, goal) > 0.03:
+            height = max(goal[2], rest_z + c.lift / 2)
+            return self._pick(f, tcp, obj, goal, carry_to=np.array([goal[0], goal[1], height]))
+        return self._pick(f, tcp, obj, goal, carry_to=goal)
+
+    def _push(self, f, tcp, obj, goal):
+        c = self.config
+        to_goal = goal[:2] - obj[:2]
+        dist = float(np.linalg.norm(to_goal))
+        if dist < c.push_done:
+            return tcp, c.grip_close  # there: stay still, so the object is not pushed past it
+        d = to_goal / dist
+        rel = tcp[:2] - obj[:2]
+        along = float(rel @ d)  # negative: behind the object
+        side = np.array([-d[1], d[0]])
+        lateral = float(rel @ side)
+        low = obj[2] + c.push_height
+        # near the goal the direction to it swings with every millimetre, so sideways errors are
+        # tolerated there rather than starting over
+        tolerance = c.push_lateral_tolerance if dist > 2 * c.push_contact else c.push_contact
+        if along < -(c.push_contact - 0.01) and abs(lateral) < tolerance and tcp[2] < low + 0.015:
+            # behind it, low: stay on the line through the object and the goal, a little ahead
+            # of the contact point; the lead shrinks near the goal so the object does not slide past
+            ahead = min(dist, c.push_lead)
+            return np.array([*(obj[:2] - d * (c.push_contact - ahead)), low]), c.grip_close
+        start = np.array([*(obj[:2] - d * (c.push_contact + 0.025)), low])  # clear of the object
+        if _xy_dist(tcp, start) > 2 * c.xy_tolerance:  # loose: the object may still be sliding
+            if tcp[2] < obj[2] + c.hover / 2 and _xy_dist(tcp, obj) < c.push_contact + 0.04:
+                return np.array([tcp[0], tcp[1], obj[2] + c.hover]), c.grip_close  # up, out of its way
+            return start + [0.0, 0.0, c.hover], c.grip_close  # over the spot behind the object
+        return start, c.grip_close  # down behind it
+
+
+def _xy_dist(a: np.ndarray, b: np.ndarray) -> float:
+    return math.hypot(float(a[0] - b[0]), float(a[1] - b[1]))
+
+
+def infer_behaviour(env: TaskEnv, stage: str) -> Behaviour:
+    """What a stage asks for, read from its success condition (and its goal override).
+
+    grasp/lift conditions -> `pick`; object-to-goal -> `push` when the stage puts the goal on the
+    table (`goal.height: object`), else `place`; tool-to-object -> `reach_object`; tool-to-goal
+    -> `reach_goal`.
+    """
+    spec = env.stages[stage].spec
+    features = {c.feature for c in spec.success.all}
+    if features & {"object_grasped", "object_height"}:
+        return "pick"
+    if "object_to_goal_distance" in features:
+        return "push" if spec.goal.height == "object" else "place"
+    if "tcp_to_object_distance" in features:
+        return "reach_object"
+    if "tcp_to_goal_distance" in features:
+        return "reach_goal"
+    raise SpecError.single(
+        env.file, "stage", f"cannot tell what stage '{stage}' asks for from its success condition "
+        f"({', '.join(sorted(features))}); the planner knows conditions on object_grasped, object_height, "
+        "object_to_goal_distance, tcp_to_object_distance and tcp_to_goal_distance",
+    )
+
+
+# ------------------------------------------------------------------------ native policies
+
+
+class MetaWorldPolicy:
+    """Meta-World's own scripted policy for an env, fed Meta-World's goal-observable observation."""
+
+    def __init__(self, env_name: str):
+        from metaworld.policies import ENV_POLICY_MAP
+
+        self.env_name = env_name
+        self.policy = ENV_POLICY_MAP[env_name]()
+        self.name = f"metaworld:{type(self.policy).__name__}"
+
+    def reset(self, env: TaskEnv) -> None:
+        pass
+
+    def __call__(self, env: TaskEnv) -> np.ndarray:
+        with warnings.catch_warnings():  # `move()` warns whenever its gain saturates the action
+            warnings.simplefilter("ignore", UserWarning)
+            return np.asarray(self.policy.get_action(env.backend.native_observation()), dtype=np.float32)
+
+
+def _metaworld_native(env: TaskEnv, stage: str) -> ScriptedPolicy | None:
+    from metaworld.policies import ENV_POLICY_MAP
+
+    names = env.backend.task_names
+    if len(names) != 1 or names[0] not in ENV_POLICY_MAP:
+        return None  # task sets (MT10) need one policy per sub-task: not wired up
+    return MetaWorldPolicy(names[0])
+
+
+NativeFactory = Callable[["TaskEnv", str], "ScriptedPolicy | None"]
+
+
+@dataclass(frozen=True)
+class BackendPolicies:
+    native: NativeFactory | None = None
+    """The backend's own scripted policy for a stage's full task, or None when it has none."""
+    planner: PlannerConfig | None = None
+    """The waypoint planner's numbers, for a backend with 4-D Cartesian + gripper actions."""
+
+
+_REGISTRY: dict[str, BackendPolicies] = {
+    "metaworld": BackendPolicies(native=_metaworld_native, planner=PlannerConfig()),
+}
+
+
+def register_backend(backend_type: str, native: NativeFactory | None = None, planner: PlannerConfig | None = None) -> None:
+    """Make `scripted_policy` work for a backend type (see the module doc)."""
+    _REGISTRY[backend_type] = BackendPolicies(native, planner)
+
+
+def scripted_policy(env: TaskEnv, stage: str | None = None, source: Source = "auto") -> ScriptedPolicy:
+    """The scripted policy for one stage of `env`'s task (default: the env's current stage).
+
+    `source="auto"`: the backend's native policy on the task's last stage (the full task), the
+    waypoint planner elsewhere (and on the last stage when there is no native policy);
+    `"native"` or `"planner"` forces one. Raises `SpecError` when none fits.
+    """
+    stage = stage or env.stage
+    if stage not in env.stages:
+        raise SpecError.single(env.file, "stage", f"no stage '{stage}'; {expected_one_of(stage, env.stages)}")
+    backend_type = env.task.backend.type
+    entry = _REGISTRY.get(backend_type, BackendPolicies())
+    last = stage == env.task.stages[-1].name
+    if source in ("auto", "native") and entry.native is not None and (last or source == "native"):
+        policy = entry.native(env, stage)
+        if policy is not None:
+            return policy
+    if source == "native":
+        raise SpecError.single(env.file, "backend", f"the {backend_type} backend has no scripted policy for this task")
+    if entry.planner is None or env.action_space.shape != (4,):
+        raise SpecError.single(
+            env.file, "backend", f"no scripted policy for the {backend_type} backend; demonstrations need a "
+            "backend with 4-D Cartesian actions or a registered policy (taskforge/demos/policies.py)",
+        )
+    return WaypointPlanner(infer_behaviour(env, stage), entry.planner)
