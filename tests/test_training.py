@@ -210,3 +210,24 @@ def test_resume_without_checkpoint_or_with_other_curriculum(tmp_path, capsys):
     other = write_curriculum(tmp_path, total_steps=200, promotion={"threshold": 0.5, "window": 4})
     assert main(["train", str(other), "--run-dir", str(tmp_path / "run"), "--resume"]) == 2
     assert "differs from the curriculum/agent of the run" in capsys.readouterr().err
+
+
+def test_asymmetric_critic_trains_on_meta_world_privileged_features(tmp_path):
+    agent = {**AGENT, "asymmetric_critic": True, "runtime": {"vector": "sharded", "workers": 2}}
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
+    doc = {"name": "asym", "agent": "agent.yaml", "total_steps": 400,
+           "phases": [{"task": str(ROOT / "tasks/metaworld/pick_place.yaml"), "stages": ["reach"]}],
+           "evaluation": {"every_steps": 10_000}}
+    (tmp_path / "cur.yaml").write_text(yaml.safe_dump(doc))
+    run = train(tmp_path / "cur.yaml", run_dir=tmp_path / "run", progress=False)
+    policy = load_checkpoint(run / "final.pt")["agent"]["policy"]
+    actor_in = next(v for k, v in policy.items() if k.startswith("actor") and k.endswith("weight")).shape[1]
+    critic_in = next(v for k, v in policy.items() if k.startswith("critic") and k.endswith("weight")).shape[1]
+    assert actor_in == 39 and critic_in > 39 + 6  # obs + velocity, goal and the physics draws
+
+
+def test_asymmetric_critic_without_privileged_features_is_a_clear_error(tmp_path, capsys):
+    cur = write_curriculum(tmp_path)
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump({**AGENT, "asymmetric_critic": True}))
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
+    assert "asymmetric_critic: the curriculum's backends expose no privileged features" in capsys.readouterr().err
