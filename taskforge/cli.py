@@ -11,7 +11,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from taskforge.spec import SpecError, SpecIssue, read_yaml
+from taskforge.spec import SpecError, SpecIssue, expected_one_of, read_yaml
 
 EXIT_USAGE = 2
 
@@ -69,7 +69,7 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     files = sorted(p for p in root.rglob("*.yaml") if "stages" in read_yaml(p))
     for path in files:
         task = load_task_spec(path)
-        source = getattr(task.backend, "task_set", None) or task.backend.env
+        source = task.backend.describe()
         print(f"{path}  [{task.backend.type}: {source}]  {' -> '.join(task.stage_names)}")
     return 0
 
@@ -86,6 +86,32 @@ def cmd_train(args: argparse.Namespace) -> int:
         print(str(exc), file=sys.stderr)
         return 130
     print(f"done: {run_dir} (final policy {run_dir / 'final.pt'})")
+    return 0
+
+
+def cmd_demos(args: argparse.Namespace) -> int:
+    from taskforge.demos import generate, save
+    from taskforge.envs import load_task
+
+    if args.episodes < 1:
+        raise SpecError.single("--episodes", "", f"expected at least 1 episode (got {args.episodes})")
+    task = load_task(args.task)
+    stage = args.stage or task.stages[-1].name
+    if stage not in task.stage_names:
+        raise SpecError.single(args.task, "stage", f"no stage '{stage}'; {expected_one_of(stage, task.stage_names)}")
+    out = Path(args.out or f"demos/{task.name}-{stage}.npz")
+    if out.exists() and not args.force:
+        raise SpecError.single(out, "", "already exists; pass --force to overwrite it or choose another --out")
+    demos = generate(args.task, stage, args.episodes, seed=args.seed, split=args.split,
+                     keep_failed=args.keep_failed, source=args.policy, progress=not args.no_progress)
+    meta = demos.metadata
+    print(f"{task.name}:{stage} ({meta['policy']}, {args.split} goals): {meta['successes']}/{args.episodes} "
+          f"episodes succeeded (success rate {meta['success_rate']:.2f})")
+    if demos.num_steps == 0:
+        print("error: no successful episode; nothing written (--keep-failed keeps failed ones)", file=sys.stderr)
+        return 1
+    save(demos, out)
+    print(f"wrote {out}: {demos.num_episodes} episodes, {demos.num_steps} steps")
     return 0
 
 
@@ -131,6 +157,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue from the run directory's last checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (e.g. in logs)")
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("demos", help="record scripted demonstrations of a task's stage")
+    p.add_argument("task", metavar="TASK.yaml")
+    p.add_argument("--stage", help="default: the task's last stage")
+    p.add_argument("--episodes", type=int, default=20, help="episodes to run (default 20); failed ones are dropped")
+    p.add_argument("--out", help="default: demos/<task name>-<stage>.npz")
+    p.add_argument("--seed", type=int, default=0, help="episode k resets with seed + k on goal (seed + k) mod goals")
+    p.add_argument("--split", choices=["train", "test"], default="train")
+    p.add_argument("--keep-failed", action="store_true", help="keep failed episodes too")
+    p.add_argument("--policy", choices=["auto", "native", "planner"], default="auto",
+                   help="the simulator's own scripted policy, the waypoint planner, or auto (native on the last stage)")
+    p.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_demos)
 
     p = sub.add_parser("eval", help="evaluate a trained policy on held-out goals")
     p.add_argument("run", metavar="RUN_DIR_OR_CHECKPOINT")

@@ -17,7 +17,7 @@ def condition_text(c: ConditionSpec) -> str:
 
 def task_summary(task: TaskSpec) -> list[str]:
     b = task.backend
-    source = getattr(b, "task_set", None) and f"task set {b.task_set}" or b.env
+    source = b.describe()
     goals = "reset seeds" if b.type == "gymnasium" else f"goals {'observable' if task.goals.observable else 'hidden'}, seed {task.goals.seed},"
     lines = [
         f"task {task.name}: backend {b.type}, {source}, episodes of {task.max_episode_steps} steps",
@@ -77,4 +77,12 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
         f"  evaluate every {spec.evaluation.every_steps:,} steps on {spec.evaluation.episodes} "
         f"{spec.evaluation.split} episodes; checkpoint every {spec.checkpoint.every_steps:,} steps"
     )
+    ws = spec.warm_start
+    if ws is not None:
+        phase = cur.phases[ws.phase]
+        source = str(cur.demos_file) if ws.demos else f"{ws.generate_episodes} scripted episodes of {phase.task.name}:{ws.stage or phase.stages[-1]}"
+        lines.append(
+            f"  warm start from {source}: BC {ws.bc_epochs} epochs, then BC term "
+            f"{ws.regularizer.weight:g} x {ws.regularizer.decay:g}^update"
+        )
     return lines

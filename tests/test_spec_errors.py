@@ -57,6 +57,7 @@ CATALOGUE = [
     ("condition-without-bound", _set(["stages", 0, "success", "all", 0], {"feature": "object_height"}), "stages[0].success.all[0]", "needs 'below' and/or 'above'"),
     ("unknown-env", _set(["backend", "env"], "pick-place-v2"), "backend.env", "did you mean 'pick-place-v3'"),
     ("unknown-backend", _set(["backend", "type"], "metawrld"), "backend.type", "did you mean 'metaworld'"),
+    ("unknown-backend-key", _set(["backend", "evn"], 1), "backend.evn", "expected one of env, task_id_in_obs, task_set, type (did you mean 'env'?)"),
     ("missing-stages", _delete(["stages"]), "stages", "required field is missing"),
     ("duplicate-stage", _set(["stages", 1, "name"], "reach"), "stages", "repeated: reach"),
     ("goal-count-too-large", _set(["goals", "test", "count"], 500), "goals.test.count", "ML1 has 50 goals per split"),

@@ -16,6 +16,7 @@ import taskforge
 from taskforge import SpecError
 from taskforge.backends.xarm7 import GOAL_SLICE, OBS_SIZE
 from taskforge.backends.xarm7_control import R_DOWN
+from taskforge.backends.xarm7_scene import make_goal_sets
 from taskforge.envs.factory import check_task_file
 from tests.conftest import TASKS
 
@@ -193,12 +194,31 @@ def test_scripted_pick_lifts_the_cube_with_randomisation(task_file):
     assert f["object_grasped"] == 0.0 and f["gripper_opening"] > 0.9
     f, _ = drive(env, grasp_at, 1.0, 10)                     # close
     assert f["object_grasped"] == 1.0
-    f, success = drive(env, cube + [0, 0, 0.15], 1.0, 25)    # lift
+    held, success = [], False
+    for _ in range(25):                                      # lift, step by step
+        f, ok = drive(env, cube + [0, 0, 0.15], 1.0, 1)
+        held.append(f["object_grasped"])
+        success |= ok
     assert f["object_height"] >= 0.05
-    assert f["object_grasped"] == 1.0
-    assert success and env.unwrapped._ever_success
+    assert all(held), held                                   # grasped on every step of the lift
+    assert success and env.unwrapped._ever_success           # the pick stage's condition held
     assert 0.0 < f["gripper_opening"] < 0.9                  # closed on the cube
     assert np.linalg.norm(f["object_velocity"]) < 0.5
+
+
+def test_scripted_place_reaches_a_held_out_high_goal():
+    env = taskforge.make(XARM / "pick_place_high_goals.yaml", stage="place", split="test", seed=1)
+    env.reset()
+    backend = env.unwrapped.backend
+    f = backend.features()
+    cube, goal = f["object_pos"].copy(), f["goal_pos"].copy()
+    assert goal[2] >= 0.2
+    grasp_at = cube - [0, 0, 0.01]
+    drive(env, cube + [0, 0, 0.10], -1.0, 25)
+    drive(env, grasp_at, -1.0, 20)
+    drive(env, grasp_at, 1.0, 10)
+    f, success = drive(env, goal - (cube - grasp_at), 1.0, 40)  # carry the cube centre to the goal
+    assert f["object_grasped"] == 1.0 and f["native_success"] == 1.0 and success
 
 
 def test_object_features_follow_the_cube():
@@ -237,9 +257,22 @@ def test_held_out_test_goals_are_disjoint_from_train_goals():
         assert np.all((goals[:, 2] >= region.z[0]) & (goals[:, 2] <= region.z[1]))
     objects = np.array([backend.goal_entry("train", i)[0] for i in range(50)])
     assert np.all(np.linalg.norm(objects - train[:, :2], axis=1) >= 0.1)
-    # The same goal index is the same placement every time, and depends on goals.seed only.
+    # The same goal index is the same placement every time, whatever the env's seed or the
+    # splits' counts (a larger count appends entries), and goals.seed changes them.
     again = taskforge.make(PICK_PLACE, seed=5).unwrapped.backend
     np.testing.assert_array_equal(again.goal_entry("test", 7)[1], test[7])
+    small_train, big_test = make_goal_sets(backend.spec, 0, 10, 500)
+    np.testing.assert_array_equal(small_train.goals, train[:10] - [0, 0, backend.spec.table_height])
+    np.testing.assert_array_equal(big_test.goals[:50, :2], test[:, :2])
+    assert not np.array_equal(make_goal_sets(backend.spec, 1, 10, 10)[0].goals, small_train.goals)
+
+
+def test_push_goals_on_the_table_are_held_out_in_the_plane():
+    backend = taskforge.make(XARM / "push.yaml", seed=0).unwrapped.backend
+    train, test = make_goal_sets(backend.spec, 0, 500, 500)
+    assert np.all(train.goals[:, 2] == 0.0) and np.all(test.goals[:, 2] == 0.0)
+    gaps = np.linalg.norm(train.goals[:, None, :2] - test.goals[None, :, :2], axis=2)
+    assert gaps.min() >= 2 * backend.spec.goal_split.margin - 1e-12
 
 
 def test_test_split_resets_to_test_goals():
@@ -280,7 +313,9 @@ def test_randomisation_changes_the_compiled_model_and_restores_it():
     assert model.actuator_gainprm[arm, 0] != nominal["actuator_gainprm"][arm, 0]  # arm servo
     assert model.actuator_gainprm[grip, 0] != nominal["actuator_gainprm"][grip, 0]  # gripper servo
     assert model.geom_size[cube, 0] != nominal["geom_size"][cube, 0]  # cube size
-    # The cube rests on the table at its randomised size.
+    # The cube rests on the table at its randomised size, and MuJoCo's mid-phase box grew too.
+    node = model.body_bvhadr[model.body("object").id]
+    np.testing.assert_allclose(model.bvh_aabb[node, 3:], model.geom_size[cube])
     assert env.unwrapped.backend.features()["object_pos"][2] == pytest.approx(model.geom_size[cube, 2], abs=1e-3)
     # Privileged: object velocity (3) + goal (3) + one draw per randomised element.
     randomizer = env.unwrapped._randomizers["xarm7"]
@@ -347,12 +382,13 @@ def test_composed_scene_matches_the_reference_scene_xml():
     env = taskforge.make(PICK_PLACE, seed=0)
     env.unwrapped._randomizers["xarm7"].restore()
     m = env.unwrapped.backend.model("xarm7")
+    tcp = []
     for model in (ref, m):
         d = mujoco.MjData(model)
         mujoco.mj_resetDataKeyframe(model, d, model.key("home").id)
         mujoco.mj_forward(model, d)
-        model.tcp_home = d.site("link_tcp").xpos.copy()  # noqa: B010 (a scratch attribute)
-    np.testing.assert_allclose(m.tcp_home, ref.tcp_home, atol=1e-9)
+        tcp.append(d.site("link_tcp").xpos.copy())
+    np.testing.assert_allclose(tcp[1], tcp[0], atol=1e-9)
     assert (m.nq, m.nv, m.nu) == (ref.nq, ref.nv, ref.nu)
     assert m.opt.timestep == ref.opt.timestep and m.opt.cone == ref.opt.cone and m.opt.impratio == ref.opt.impratio
     for name in ("object_geom", "table"):
@@ -363,6 +399,30 @@ def test_composed_scene_matches_the_reference_scene_xml():
 
 
 # --------------------------------------------------------------------------- Menagerie's model
+
+
+def test_robot_model_path_is_relative_to_the_task_file_and_keeps_its_meshdir(tmp_path, monkeypatch):
+    """A robot file elsewhere with meshes in its own `meshdir` (like Menagerie's `assets/`)."""
+    import struct
+
+    (tmp_path / "robot" / "assets").mkdir(parents=True)
+    corners = [(0, 0, 0), (0.05, 0, 0), (0, 0.05, 0), (0, 0, 0.05)]
+    faces = [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)]
+    stl = b"\0" * 80 + struct.pack("<I", len(faces))
+    for face in faces:
+        stl += struct.pack("<3f", 0, 0, 0) + b"".join(struct.pack("<3f", *corners[i]) for i in face) + b"\0\0"
+    (tmp_path / "robot" / "assets" / "tet.stl").write_bytes(stl)
+    xml = (XARM / "xarm7.xml").read_text()
+    xml = xml.replace('autolimits="true"/>', 'autolimits="true" meshdir="assets"/>', 1)
+    xml = xml.replace("<asset>", '<asset><mesh file="tet.stl"/>', 1)
+    xml = xml.replace('<geom name="link1_geom"', '<geom name="link1_mesh" type="mesh" mesh="tet"/><geom name="link1_geom"', 1)
+    (tmp_path / "robot" / "xarm7.xml").write_text(xml)
+    (tmp_path / "tasks").mkdir()
+    task = write_task(tmp_path / "tasks", {"robot_model": "../robot/xarm7.xml"})
+    monkeypatch.chdir(XARM)  # somewhere else: paths must not depend on the working directory
+    env = taskforge.make(task, seed=0)
+    env.reset()
+    assert env.unwrapped.backend.model("xarm7").nmesh == 1
 
 
 @pytest.mark.skipif(not REFERENCE.is_file(), reason="Menagerie's xArm7 reference is not beside the repository")

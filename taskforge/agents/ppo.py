@@ -11,7 +11,9 @@ Differences from CleanRL, all deliberate:
 * the caller owns the step budget, so learning-rate annealing follows `set_progress()`;
 * observation/reward normalisation live in the agent, not in env wrappers, so their statistics
   are saved with the networks and frozen for evaluation;
-* an optional asymmetric critic reads `concat(obs, info["privileged"])`.
+* an optional asymmetric critic reads `concat(obs, info["privileged"])`;
+* an optional behaviour-cloning term on demonstrations, with a decaying weight (DAPG,
+  Rajeswaran et al. 2018; see `set_demo_regularizer` and `agents/bc.py` for the pretraining).
 """
 
 from __future__ import annotations
@@ -90,6 +92,21 @@ def ppo_loss(policy: ActorCritic, mb: Minibatch, ppo: PPOSpec, generator: torch.
     )
 
 
+@dataclass(frozen=True)
+class DemoRegularizer:
+    """Demonstrations for the BC term of the PPO loss: raw (unnormalised) observations, the demo
+    actions as raw Gaussian samples, and the weight schedule `weight * decay**k`."""
+
+    observations: np.ndarray
+    raw_actions: torch.Tensor
+    weight: float
+    decay: float
+    batch_size: int
+
+    def weight_at(self, update: int) -> float:
+        return self.weight * self.decay**update
+
+
 def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
     """`1 - Var[returns - values] / Var[returns]`: 1 is a perfect critic, <= 0 no better than a
     constant (NaN when the returns do not vary)."""
@@ -157,6 +174,24 @@ class PPOAgent:
         self._critic_obs: torch.Tensor | None = None
         self._episode_starts: torch.Tensor | None = None
         self._state: RecurrentState | None = None
+        self.demo_regularizer: DemoRegularizer | None = None
+
+    def set_demo_regularizer(
+        self, observations: np.ndarray, actions: np.ndarray, weight: float, decay: float, batch_size: int | None = None
+    ) -> None:
+        """Add `weight * decay**k * -log pi(a_demo | s_demo)` to the loss of every minibatch of
+        PPO update k (counting from 0 with `num_updates`), averaged over `batch_size` demo steps
+        drawn afresh per minibatch (default: PPO's minibatch size). DAPG's behaviour-cloning
+        term (Rajeswaran et al., 2018) with their schedule, without their advantage weighting:
+        it keeps the policy near the demonstrations early and fades as PPO takes over.
+        `actions` are env actions; observations are normalised with the current statistics at
+        every update. MLP policies only."""
+        if self.policy.recurrent:
+            raise ValueError("the demonstration regulariser supports MLP policies only, not an LSTM")
+        ppo = self.spec.ppo
+        batch = batch_size or ppo.num_envs * ppo.rollout_steps // ppo.num_minibatches
+        raw = self.policy.actions.from_env(torch.as_tensor(np.asarray(actions, dtype=np.float32)))
+        self.demo_regularizer = DemoRegularizer(np.asarray(observations, dtype=np.float32), raw, weight, decay, min(batch, len(raw)))
 
     # ----------------------------------------------------------------------------------- rollout
 
@@ -283,11 +318,22 @@ class PPOAgent:
         totals: dict[str, float] = {}
         minibatches_run = 0
         epochs = 0
+        demos = self.demo_regularizer
+        if demos is not None:
+            bc_weight = demos.weight_at(self.num_updates)
+            demo_obs = self.obs_normalizer(demos.observations, update=False)
         for epochs in range(1, ppo.update_epochs + 1):
             for mb in self.buffer.minibatches(ppo.num_minibatches, self.generator, self.policy.recurrent):
                 loss = ppo_loss(self.policy, mb, ppo, self.generator)
+                total = loss.total
+                if demos is not None:  # DAPG's decaying behaviour-cloning term (see set_demo_regularizer)
+                    idx = torch.randint(len(demo_obs), (demos.batch_size,), generator=self.generator)
+                    dist, _ = self.policy.distribution(demo_obs[idx][None], None, torch.zeros((1, len(idx)), dtype=torch.bool))
+                    bc_loss = -self.policy.actions.log_prob(dist, demos.raw_actions[idx][None]).mean()
+                    total = total + bc_weight * bc_loss
+                    totals["bc_loss"] = totals.get("bc_loss", 0.0) + bc_loss.item()
                 self.optimizer.zero_grad()
-                loss.total.backward()
+                total.backward()
                 # global gradient clipping (detail #11)
                 nn.utils.clip_grad_norm_(self.policy.parameters(), ppo.max_grad_norm)
                 self.optimizer.step()
@@ -303,6 +349,8 @@ class PPOAgent:
         metrics["explained_variance"] = explained_variance(self.buffer.values, self.buffer.returns)
         metrics["learning_rate"] = self.optimizer.param_groups[0]["lr"]
         metrics["epochs"] = float(epochs)
+        if demos is not None:
+            metrics["bc_weight"] = bc_weight
         return metrics
 
     def set_progress(self, fraction: float) -> None:

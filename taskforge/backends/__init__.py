@@ -1,7 +1,7 @@
 """Simulator backends, one module each, chosen by the `type` of a task's `backend:` block.
 
-Each backend module offers `create(task, file) -> Backend`, `check_task(task, file) ->
-list[SpecIssue]` and `PROVIDES` (the feature names it fills); it is imported only when a task uses it, so validating a Meta-World task never
+Each backend module offers `check_task(task, file) -> list[SpecIssue]`, `create(task, file) ->
+Backend` (called only once the checks pass) and `PROVIDES` (the feature names it fills); it is imported only when a task uses it, so validating a Meta-World task never
 imports another simulator's packages.
 """
 
@@ -12,7 +12,7 @@ from pathlib import Path
 from types import ModuleType
 
 from taskforge.backends.base import Backend, GoalOverride, Split
-from taskforge.spec import SpecIssue, TaskSpec
+from taskforge.spec import SpecError, SpecIssue, TaskSpec
 
 _MODULES = {
     "metaworld": "taskforge.backends.metaworld",
@@ -26,7 +26,11 @@ def _module(task: TaskSpec) -> ModuleType:
 
 
 def make_backend(task: TaskSpec, file: str | Path) -> Backend:
-    return _module(task).create(task, file)
+    module = _module(task)
+    issues = module.check_task(task, file)
+    if issues:
+        raise SpecError(issues)
+    return module.create(task, file)
 
 
 def backend_issues(task: TaskSpec, file: str | Path) -> list[SpecIssue]:

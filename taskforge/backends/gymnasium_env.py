@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from taskforge.backends.base import GoalOverride, Split
-from taskforge.spec import SpecError, SpecIssue, TaskSpec, expected_one_of
+from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
 from taskforge.spec.task import GoalsSpec, GymnasiumBackendSpec
 from taskforge.terms import Features
 
@@ -89,7 +89,5 @@ def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
 
 
 def create(task: TaskSpec, file: str | Path) -> GymnasiumBackend:
-    issues = check_task(task, file)
-    if issues:
-        raise SpecError(issues)
+    """The backend of a task that passed `check_task` (see `taskforge.backends.make_backend`)."""
     return GymnasiumBackend(task.backend, task.goals)

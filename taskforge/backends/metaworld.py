@@ -24,7 +24,7 @@ from metaworld.env_dict import ALL_V3_ENVIRONMENTS, MT10_V3
 from metaworld.types import Task
 
 from taskforge.backends.base import GoalOverride, Split
-from taskforge.spec import SpecError, SpecIssue, TaskSpec, expected_one_of
+from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
 from taskforge.spec.task import GoalsSpec, MetaWorldBackendSpec
 from taskforge.terms import ENV_FEATURES, FEATURES, Features
 
@@ -169,6 +169,11 @@ class MetaWorldBackend:
         obs[_GOAL] = self._active._target_pos  # the env may have zeroed this slice in place
         return obs
 
+    @property
+    def active_task(self) -> str:
+        """The Meta-World env name of the current episode (one of `task_names`)."""
+        return self.task_names[self._active_index]
+
     def features(self) -> Features:
         # Runs every step: plain-float arithmetic on 3-vectors is several times faster than
         # numpy's per-call overhead at this size, which is what keeps the env within 10% of
@@ -218,9 +223,7 @@ def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
 
 
 def create(task: TaskSpec, file: str | Path) -> MetaWorldBackend:
-    issues = check_task(task, file)
-    if issues:
-        raise SpecError(issues)
+    """The backend of a task that passed `check_task` (see `taskforge.backends.make_backend`)."""
     return MetaWorldBackend(task.backend, task.goals)
 
 

@@ -17,10 +17,11 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-import taskforge
-from taskforge.spec.task import XArm7BackendSpec, XArm7GoalRegionSpec, XArm7GoalSplitSpec
+from taskforge.spec.task import XArm7BackendSpec
 
-BUILTIN_ROBOT = Path(taskforge.__file__).resolve().parents[1] / "tasks" / "xarm7" / "xarm7.xml"
+# The repository's tasks/ folder, beside the taskforge package (a source checkout or an editable
+# install; tasks/ is not part of the built package).
+BUILTIN_ROBOT = Path(__file__).resolve().parents[2] / "tasks" / "xarm7" / "xarm7.xml"
 
 ARM_JOINTS = tuple(f"joint{i}" for i in range(1, 8))
 ARM_ACTUATORS = tuple(f"act{i}" for i in range(1, 8))
@@ -185,60 +186,59 @@ class GoalRegionTooSmall(ValueError):
     pass
 
 
+_CHUNK = 1024  # candidates per draw: fixed, so entry i never depends on the split's count
+
+
 def make_goal_sets(spec: XArm7BackendSpec, seed: int, n_train: int, n_test: int) -> tuple[GoalSet, GoalSet]:
-    """Train and test entries from one generator seeded with `goals.seed`.
+    """Train and test entries drawn from `goals.seed`.
 
     Goals: the checkerboard split of `XArm7GoalSplitSpec` (train in even cells, test in odd
-    cells, `margin` inside them), so the splits are disjoint with a gap of 2 x margin. Cube
-    starts: uniform over `object_region`, redrawn until at least `min_goal_distance` away from
-    the entry's goal horizontally. Train entries never depend on the test count (and vice
-    versa): each split has its own child generator.
+    cells, each at least `margin` inside its cell), so the splits are disjoint with a gap of at
+    least 2 x margin. Cube starts: uniform over `object_region`, redrawn until at least
+    `min_goal_distance` from the entry's goal horizontally. Each split has its own child
+    generator and draws in fixed-size chunks, so entry i of a split depends only on the seed
+    and the regions: never on either split's count (a larger count appends entries).
     """
     train_rng, test_rng = np.random.default_rng(seed).spawn(2)
-    sets = []
-    for rng, count, parity in ((train_rng, n_train, 0), (test_rng, n_test, 1)):
-        goals = _checkerboard_goals(spec.goal_region, spec.goal_split, parity, count, rng)
-        objects = _object_starts(spec, goals, rng)
-        sets.append(GoalSet(objects, goals))
-    return sets[0], sets[1]
+    return _split(spec, train_rng, 0, n_train), _split(spec, test_rng, 1, n_test)
 
 
-def _checkerboard_goals(region: XArm7GoalRegionSpec, split: XArm7GoalSplitSpec, parity: int, count: int,
-                        rng: np.random.Generator) -> np.ndarray:
+def _split(spec: XArm7BackendSpec, rng: np.random.Generator, parity: int, count: int) -> GoalSet:
+    region, split = spec.goal_region, spec.goal_split
     low = np.array([region.x[0], region.y[0], region.z[0]])
     high = np.array([region.x[1], region.y[1], region.z[1]])
-    out = np.empty((0, 3))
-    for _ in range(1000):
-        cand = rng.uniform(low, high, size=(max(64, 4 * (count - len(out))), 3))
-        # Cells are anchored at the world origin (z at the table top), so the split of a point
-        # does not depend on the region's bounds.
+    obj_low = np.array([spec.object_region.x[0], spec.object_region.y[0]])
+    obj_high = np.array([spec.object_region.x[1], spec.object_region.y[1]])
+    margin = split.margin / split.cell
+    goals, objects, total, chunks = [], [], 0, 0
+    while total < count:
+        cand = rng.uniform(low, high, size=(_CHUNK, 3))
+        # Cells are anchored at the world origin (z: the table top), so a point's colour does
+        # not depend on the region's bounds. The margin applies along the axes the region
+        # extends in (a flat z, e.g. goals on the table, has one value and one cell).
         cell = cand / split.cell
         index = np.floor(cell)
         frac = cell - index
-        m = split.margin / split.cell
-        # The margin applies along axes the region extends in (a flat z has one value).
-        inside = np.all((frac >= m) & (frac <= 1 - m) | (high == low), axis=1)
-        # A flat (or thin) axis has a single cell; only the others alternate.
-        ok = inside & (index.sum(axis=1).astype(np.int64) % 2 == parity)
-        out = np.concatenate([out, cand[ok]])[:count]
-        if len(out) == count:
-            return out
-    raise GoalRegionTooSmall(
-        f"could not draw {count} {'train' if parity == 0 else 'test'} goals: the goal region has (almost) no "
-        f"checkerboard cell of that colour; enlarge goal_region or reduce goal_split.cell ({split.cell:g}) / margin"
-    )
-
-
-def _object_starts(spec: XArm7BackendSpec, goals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    region = spec.object_region
-    low, high = np.array([region.x[0], region.y[0]]), np.array([region.x[1], region.y[1]])
-    out = rng.uniform(low, high, size=(len(goals), 2))
-    for _ in range(1000):
-        bad = np.linalg.norm(out - goals[:, :2], axis=1) < spec.min_goal_distance
-        if not bad.any():
-            return out
-        out[bad] = rng.uniform(low, high, size=(int(bad.sum()), 2))
-    raise GoalRegionTooSmall(
-        f"could not place the cube at least min_goal_distance ({spec.min_goal_distance:g} m) from some goals; "
-        "reduce min_goal_distance or enlarge object_region/goal_region"
-    )
+        inside = np.all(((frac >= margin) & (frac <= 1 - margin)) | (high == low), axis=1)
+        chosen = cand[inside & (index.sum(axis=1).astype(np.int64) % 2 == parity)]
+        chunks += 1
+        if total == 0 and len(chosen) == 0 and chunks >= 64:
+            raise GoalRegionTooSmall(
+                f"could not draw {'train' if parity == 0 else 'test'} goals: the goal region has (almost) no "
+                f"checkerboard cell of that colour; enlarge goal_region or reduce goal_split.cell ({split.cell:g}) / margin"
+            )
+        starts = rng.uniform(obj_low, obj_high, size=(len(chosen), 2))
+        for _ in range(1000):
+            bad = np.linalg.norm(starts - chosen[:, :2], axis=1) < spec.min_goal_distance
+            if not bad.any():
+                break
+            starts[bad] = rng.uniform(obj_low, obj_high, size=(int(bad.sum()), 2))
+        else:
+            raise GoalRegionTooSmall(
+                f"could not place the cube at least min_goal_distance ({spec.min_goal_distance:g} m) from some goals; "
+                "reduce min_goal_distance or enlarge object_region/goal_region"
+            )
+        goals.append(chosen)
+        objects.append(starts)
+        total += len(chosen)
+    return GoalSet(np.concatenate(objects)[:count], np.concatenate(goals)[:count])

@@ -231,31 +231,33 @@ def infer_behaviour(env: TaskEnv, stage: str) -> Behaviour:
 
 
 class MetaWorldPolicy:
-    """Meta-World's own scripted policy for an env, fed Meta-World's goal-observable observation."""
+    """Meta-World's own scripted policy for each env of the task (one, or the ten of MT10), fed
+    Meta-World's goal-observable observation; the env of the current episode picks which."""
 
-    def __init__(self, env_name: str):
+    def __init__(self, env_names: list[str]):
         from metaworld.policies import ENV_POLICY_MAP
 
-        self.env_name = env_name
-        self.policy = ENV_POLICY_MAP[env_name]()
-        self.name = f"metaworld:{type(self.policy).__name__}"
+        self.policies = {name: ENV_POLICY_MAP[name]() for name in env_names}
+        names = sorted({type(p).__name__ for p in self.policies.values()})
+        self.name = "metaworld:" + (names[0] if len(names) == 1 else f"{len(names)} policies")
 
     def reset(self, env: TaskEnv) -> None:
         pass
 
     def __call__(self, env: TaskEnv) -> np.ndarray:
+        policy = self.policies[env.backend.active_task]
         with warnings.catch_warnings():  # `move()` warns whenever its gain saturates the action
             warnings.simplefilter("ignore", UserWarning)
-            return np.asarray(self.policy.get_action(env.backend.native_observation()), dtype=np.float32)
+            return np.asarray(policy.get_action(env.backend.native_observation()), dtype=np.float32)
 
 
 def _metaworld_native(env: TaskEnv, stage: str) -> ScriptedPolicy | None:
     from metaworld.policies import ENV_POLICY_MAP
 
-    names = env.backend.task_names
-    if len(names) != 1 or names[0] not in ENV_POLICY_MAP:
-        return None  # task sets (MT10) need one policy per sub-task: not wired up
-    return MetaWorldPolicy(names[0])
+    names = list(env.backend.task_names)
+    if not all(name in ENV_POLICY_MAP for name in names):
+        return None
+    return MetaWorldPolicy(names)
 
 
 NativeFactory = Callable[["TaskEnv", str], "ScriptedPolicy | None"]

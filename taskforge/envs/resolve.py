@@ -47,6 +47,8 @@ class ResolvedCurriculum:
     agent_file: Path
     agent: AgentSpec
     phases: list[CurriculumPhase]
+    demos_file: Path | None = None
+    """`warm_start.demos`, resolved relative to the curriculum file."""
 
 
 def load_curriculum(path: str | Path) -> ResolvedCurriculum:
@@ -71,9 +73,36 @@ def load_curriculum(path: str | Path) -> ResolvedCurriculum:
         if eval_stage is not None and eval_stage not in task.stage_names:
             msg = f"no stage '{eval_stage}' in {task_file} (phase {i + 1}); {expected_one_of(eval_stage, task.stage_names)}"
             issues.append(SpecIssue(str(path), "evaluation.stage", msg))
+    demos_file = None
+    if spec.warm_start is not None and not issues:
+        demos_file = _check_warm_start(spec, path, agent, phases, issues)
     if issues:
         raise SpecError(issues)
-    return ResolvedCurriculum(path, spec, agent_file, agent, phases)
+    return ResolvedCurriculum(path, spec, agent_file, agent, phases, demos_file)
+
+
+def _check_warm_start(
+    spec: CurriculumSpec, path: Path, agent: AgentSpec, phases: list[CurriculumPhase], issues: list[SpecIssue]
+) -> Path | None:
+    """The warm start's phase, stage, demos file and policy type; returns the demos path."""
+    ws = spec.warm_start
+    assert ws is not None
+    if agent.policy.type != "mlp":
+        msg = f"warm start supports MLP policies only; the agent's policy.type is '{agent.policy.type}'"
+        issues.append(SpecIssue(str(path), "warm_start", msg))
+    if ws.phase >= len(phases):
+        msg = f"no phase {ws.phase}; expected an index below {len(phases)} (phases counts from 0)"
+        issues.append(SpecIssue(str(path), "warm_start.phase", msg))
+    elif ws.stage is not None and ws.stage not in phases[ws.phase].task.stage_names:
+        task = phases[ws.phase]
+        msg = f"no stage '{ws.stage}' in {task.task_file}; {expected_one_of(ws.stage, task.task.stage_names)}"
+        issues.append(SpecIssue(str(path), "warm_start.stage", msg))
+    if ws.demos is None:
+        return None
+    demos_file = resolve_relative(path, ws.demos)
+    if not demos_file.is_file():
+        issues.append(SpecIssue(str(path), "warm_start.demos", f"file not found: {demos_file}"))
+    return demos_file
 
 
 def _collect(issues: list[SpecIssue], loader, file: Path, parent: Path, field: str):

@@ -26,7 +26,7 @@ _ARRAYS: dict[str, tuple[str, ...]] = {
     "dof_damping": ("dof_damping",),
     "actuator_gain": ("actuator_gainprm", "actuator_biasprm"),
     "gravity": ("opt.gravity",),
-    "object_size": ("geom_size", "geom_rbound", "geom_aabb"),
+    "object_size": ("geom_size", "geom_rbound", "geom_aabb", "bvh_aabb"),
 }
 _NAMED_OBJ = {
     "body_mass": mujoco.mjtObj.mjOBJ_BODY,
@@ -142,9 +142,18 @@ def _apply_gravity(model: mujoco.MjModel, idx: np.ndarray, value: np.ndarray, op
 
 def _apply_object_size(model: mujoco.MjModel, idx: np.ndarray, value: np.ndarray, op: str) -> None:
     model.geom_size[idx] *= value[:, None]
-    # The collision broad/mid-phase use these bounds; stale bounds would miss contacts.
+    # The collision broad- and mid-phase cull with these bounds, fixed at compile time; stale
+    # bounds miss contacts (a cube grown 5 % lost its finger-pad contacts now and then).
     model.geom_rbound[idx] *= value
     model.geom_aabb[idx, 3:] *= value[:, None]
+    for geom, scale in zip(idx, value):
+        body = model.geom_bodyid[geom]
+        nodes = np.arange(model.body_bvhadr[body], model.body_bvhadr[body] + model.body_bvhnum[body])
+        leaf = nodes[model.bvh_nodeid[nodes] == geom]
+        model.bvh_aabb[leaf, 3:] *= scale
+        # Inner nodes enclose other geoms too: they may grow with this one, never shrink.
+        inner = nodes[model.bvh_nodeid[nodes] < 0]
+        model.bvh_aabb[inner, 3:] *= max(scale, 1.0)
 
 
 _APPLY = {

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-from pydantic import Field, field_validator
+from pydantic import Field, field_validator, model_validator
 
 from taskforge.spec.common import StrictModel
 
@@ -74,6 +74,42 @@ class PhaseSpec(StrictModel):
     sampling: SamplingSpec | None = None
 
 
+class RegularizerSpec(StrictModel):
+    """DAPG-style behaviour-cloning term added to PPO's loss: `weight * decay**k` times the
+    negative log-likelihood of demo actions, at PPO update k."""
+
+    weight: float = Field(default=0.1, ge=0.0)
+    """Weight at the first PPO update; 0 turns the term off."""
+    decay: float = Field(default=0.95, gt=0.0, le=1.0)
+    """Multiplies the weight after every PPO update (DAPG's 0.95: 1 % of the weight after 90)."""
+
+
+class WarmStartSpec(StrictModel):
+    """Pretrain the agent on demonstrations before the curriculum starts, then keep a decaying
+    BC term in PPO's loss (MLP policies only)."""
+
+    demos: str | None = None
+    """A demos file (`taskforge demos`), relative to the curriculum file."""
+    generate_episodes: int | None = Field(default=None, ge=1)
+    """Or: record this many scripted episodes at the start of training (train goals; failed
+    episodes are dropped). Exactly one of `demos` and `generate_episodes`."""
+    phase: int = Field(default=0, ge=0)
+    """Which phase's task the demos come from (index into `phases`)."""
+    stage: str | None = None
+    """Which stage of that task; default the phase's last stage. With `demos`, checked against
+    the stage the file was recorded on."""
+    bc_epochs: int = Field(default=50, ge=0)
+    bc_batch_size: int = Field(default=256, ge=1)
+    bc_learning_rate: float = Field(default=1e-3, gt=0.0)
+    regularizer: RegularizerSpec = RegularizerSpec()
+
+    @model_validator(mode="after")
+    def _one_source(self) -> "WarmStartSpec":
+        if (self.demos is None) == (self.generate_episodes is None):
+            raise ValueError("give exactly one of 'demos' (a file) and 'generate_episodes' (a number)")
+        return self
+
+
 class CurriculumSpec(StrictModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-.]+$")
     """Also names the default run directory (runs/<name>-seed<seed>)."""
@@ -88,3 +124,5 @@ class CurriculumSpec(StrictModel):
     sampling: SamplingSpec = SamplingSpec()
     evaluation: EvaluationSpec = EvaluationSpec()
     checkpoint: CheckpointSpec = CheckpointSpec()
+    warm_start: WarmStartSpec | None = None
+    """Behaviour-cloning warm start from demonstrations; none by default."""

@@ -13,7 +13,7 @@ from pydantic import BaseModel, ValidationError
 
 from taskforge.spec.agent import AgentSpec
 from taskforge.spec.curriculum import CurriculumSpec
-from taskforge.spec.errors import SpecError, SpecIssue, issues_from_validation
+from taskforge.spec.errors import SpecError, issues_from_validation
 from taskforge.spec.task import BACKEND_TYPES, TaskSpec
 
 M = TypeVar("M", bound=BaseModel)
@@ -82,6 +82,13 @@ def field_names_at(model: type[BaseModel], loc: tuple[str | int, ...]) -> list[s
 
 def _step(annotation: Any, part: str | int) -> Any:
     annotation = _unwrap_optional(annotation)
+    if typing.get_origin(annotation) in (typing.Union, types.UnionType):
+        # a tagged union (the backend): pydantic's location names the member by its `type`
+        for member in typing.get_args(annotation):
+            literal = getattr(member, "model_fields", {}).get("type")
+            if literal is not None and part in typing.get_args(literal.annotation):
+                return member
+        return None
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
         if isinstance(part, str) and part in annotation.model_fields:
             return annotation.model_fields[part].annotation

@@ -19,7 +19,8 @@ Features = dict[str, FeatureValue]
 @dataclass(frozen=True)
 class FeatureInfo:
     size: int
-    """1 for a scalar (a Python float in the dict), else the length of the vector."""
+    """1 for a scalar (a Python float in the dict), else the length of the vector (0: depends on
+    the backend)."""
     doc: str
 
 
@@ -34,7 +35,7 @@ FEATURES: dict[str, FeatureInfo] = {
     "tcp_to_object_distance": FeatureInfo(1, "|tcp_pos - object_pos| (m)"),
     "tcp_to_goal_distance": FeatureInfo(1, "|tcp_pos - goal_pos| (m)"),
     "object_velocity": FeatureInfo(3, "linear velocity of the object (m/s); privileged"),
-    "action": FeatureInfo(4, "the action the agent chose this step (before noise and latency)"),
+    "action": FeatureInfo(0, "the action the agent chose this step, before noise and latency (4-D on Meta-World and xArm7 Cartesian, 8-D in xArm7 joint mode)"),
     "native_reward": FeatureInfo(1, "the simulator suite's own reward (Meta-World's v2 reward)"),
     "native_success": FeatureInfo(1, "the simulator suite's own success flag (Meta-World's `success`)"),
     "native_return": FeatureInfo(1, "sum of `native_reward` so far this episode (e.g. LunarLander 'solved' at 200)"),

@@ -28,6 +28,7 @@ from taskforge.spec import SpecError
 from taskforge.training.checkpoint import load_checkpoint, save_checkpoint, save_json
 from taskforge.training.driver import CurriculumDriver
 from taskforge.training.metrics import MetricsLogger
+from taskforge.training.warm_start import prepare_warm_start
 
 CHECKPOINT = "checkpoint.pt"
 FINAL = "final.pt"
@@ -100,17 +101,23 @@ def train(
     privileged = agent_spec.asymmetric_critic
     set_torch_threads(agent_spec.runtime)
     shapes = probe_phases([(p.task, p.task_file) for p in cur.phases], privileged, cur.file)
+    if privileged and shapes.privileged_size == 0:
+        raise SpecError.single(cur.agent_file, "asymmetric_critic", "the curriculum's backends expose no privileged features; set it to false")
     agent = PPOAgent(agent_spec, shapes.observation_space, shapes.action_space, shapes.privileged_size, seed)
     scheduler = CurriculumScheduler(cur.spec, [p.stages for p in cur.phases], shapes.task_names, seed)
     if state:
         agent.load_state_dict(state["agent"])
         scheduler.load_state_dict(state["curriculum"])
+    # demos: behaviour-cloning pretraining (fresh runs only) and PPO's decaying BC term
+    warm = prepare_warm_start(cur, agent, run_dir, seed, resumed=state is not None, progress=progress)
 
     run_dir.mkdir(parents=True, exist_ok=True)
     for stale in run_dir.glob(".*.tmp"):  # half-written by a process killed mid-save
         stale.unlink()
     save_json(config, run_dir / "config.json")
     logger = MetricsLogger(run_dir, resume_step=agent.global_step if state else None)
+    if warm is not None:
+        warm.record(run_dir, logger)
 
     def snapshot() -> dict[str, Any]:
         return copy.deepcopy({"config": config, "agent": agent.state_dict(), "curriculum": scheduler.state_dict()})

@@ -1,0 +1,150 @@
+"""Scripted demonstrations on the real Meta-World simulator, with the task's randomisation on:
+Meta-World's own policy on the full task, the waypoint planner on the easier stages, recording,
+the `.npz` files and `taskforge demos`."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import taskforge
+from taskforge.cli import main
+from taskforge.demos import (
+    MetaWorldPolicy,
+    WaypointPlanner,
+    generate,
+    infer_behaviour,
+    load,
+    record,
+    save,
+    scripted_policy,
+)
+from taskforge.spec import SpecError
+from tests.conftest import PICK_PLACE, TASKS
+
+
+def test_metaworld_policy_places_under_randomisation_with_the_goal_hidden():
+    """Meta-World's pick-place policy reads the true goal from the backend, not the agent's
+    observation (goal zeroed, noise added), and succeeds on several seeds."""
+    env = taskforge.make(PICK_PLACE, stage="place")
+    policy = scripted_policy(env)
+    assert isinstance(policy, MetaWorldPolicy) and list(policy.policies) == ["pick-place-v3"]
+    demos = record(env, policy, episodes=3, seed=7, keep_failed=True)
+    assert demos.episode_success.all(), demos.episode_success
+    assert np.all(demos.observations[:, 36:39] == 0.0)  # what the agent saw: the goal hidden
+    assert demos.metadata["goal_hidden"] and demos.metadata["success_rate"] == 1.0
+    env.close()
+
+
+@pytest.mark.parametrize("stage, behaviour", [("reach", "reach_object"), ("push", "push"), ("pick", "pick")])
+def test_waypoint_planner_succeeds_on_the_early_stages(stage, behaviour):
+    env = taskforge.make(PICK_PLACE, stage=stage)
+    policy = scripted_policy(env)
+    assert isinstance(policy, WaypointPlanner) and policy.behaviour == behaviour
+    demos = record(env, policy, episodes=4, seed=20, keep_failed=True)
+    assert demos.episode_success.all(), (stage, demos.episode_success)
+    env.close()
+
+
+def test_behaviour_is_read_from_the_success_condition():
+    env = taskforge.make(PICK_PLACE)
+    assert [infer_behaviour(env, s) for s in ("reach", "push", "pick", "place")] == ["reach_object", "push", "pick", "place"]
+    assert isinstance(scripted_policy(env, "place", source="planner"), WaypointPlanner)
+    env.close()
+    reach = taskforge.make(TASKS / "metaworld" / "reach.yaml")
+    assert infer_behaviour(reach, reach.stage) == "reach_goal"
+    reach.close()
+
+
+class EveryOtherEpisode:
+    """The planner on even episodes, standing still on odd ones (which then fail)."""
+
+    name = "test:every-other"
+
+    def __init__(self, env):
+        self.planner = scripted_policy(env)
+        self.episode = -1
+
+    def reset(self, env):
+        self.episode += 1
+
+    def __call__(self, env):
+        return self.planner(env) if self.episode % 2 == 0 else np.zeros(4, dtype=np.float32)
+
+
+def test_record_drops_failed_episodes_unless_asked_and_files_round_trip(tmp_path):
+    env = taskforge.make(PICK_PLACE, stage="reach", privileged=True)
+    demos = record(env, EveryOtherEpisode(env), episodes=3, seed=0)
+    assert demos.num_episodes == 2 and demos.episode_success.all()
+    assert demos.metadata["successes"] == 2 and demos.metadata["success_rate"] == pytest.approx(2 / 3)
+    assert list(demos.goal_indices) == [0, 2] and demos.num_steps == 2 * env.max_episode_steps
+    assert demos.privileged is not None and demos.privileged.shape == (demos.num_steps, env.privileged_size)
+    everything = record(env, EveryOtherEpisode(env), episodes=3, seed=0, keep_failed=True)
+    assert list(everything.episode_success) == [True, False, True]
+    np.testing.assert_array_equal(everything.observations[: env.max_episode_steps], demos.observations[: env.max_episode_steps])
+
+    path = save(demos, tmp_path / "sub" / "d.npz")
+    assert [p.name for p in path.parent.iterdir()] == ["d.npz"]  # no temp file left behind
+    back = load(path)
+    assert back.metadata == demos.metadata
+    for key, value in demos.arrays().items():
+        np.testing.assert_array_equal(getattr(back, key), value)
+    env.close()
+
+
+def test_load_rejects_what_is_not_a_demos_file(tmp_path):
+    np.savez(tmp_path / "other.npz", x=np.zeros(3))
+    (tmp_path / "text.npz").write_text("hello")
+    for name, fragment in (("other.npz", "missing"), ("text.npz", "not a readable"), ("none.npz", "no such file")):
+        with pytest.raises(SpecError, match=fragment):
+            load(tmp_path / name)
+
+
+def test_demos_command_writes_a_well_formed_file_and_refuses_to_overwrite(tmp_path, capsys):
+    out = tmp_path / "reach.npz"
+    args = ["demos", str(PICK_PLACE), "--stage", "reach", "--episodes", "3", "--seed", "5", "--out", str(out), "--no-progress"]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "3/3 episodes succeeded (success rate 1.00)" in printed and str(out) in printed
+    with np.load(out, allow_pickle=False) as data:
+        keys = set(data.files)
+        assert {"observations", "actions", "rewards", "successes", "episode_starts", "terminated", "truncated",
+                "episode_lengths", "episode_success", "goal_indices", "metadata", "privileged"} <= keys
+        n = int(data["episode_lengths"].sum())
+        assert data["observations"].shape == (n, 39) and data["actions"].shape == (n, 4)
+        assert data["rewards"].shape == data["successes"].shape == data["episode_starts"].shape == (n,)
+        assert data["episode_starts"].sum() == 3 and data["truncated"].sum() == 3 and data["episode_success"].all()
+        assert np.abs(data["actions"]).max() <= 1.0
+        meta = json.loads(str(data["metadata"]))
+    assert meta["task"] == "metaworld-pick-place" and meta["stage"] == "reach" and meta["split"] == "train"
+    assert meta["seed"] == 5 and meta["episodes_kept"] == 3 and meta["taskforge_version"] == taskforge.__version__
+    assert meta["policy"] == "planner:reach_object"
+
+    before = out.read_bytes()
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "already exists; pass --force" in err
+    assert out.read_bytes() == before
+    assert main([*args, "--episodes", "1", "--force"]) == 0
+    assert load(out).num_episodes == 1
+
+
+@pytest.mark.parametrize(
+    "extra, fragment",
+    [
+        (["--stage", "lift"], "stage: no stage 'lift'"),
+        (["--episodes", "0"], "expected at least 1 episode"),
+    ],
+)
+def test_demos_command_bad_input_is_one_line(extra, fragment, tmp_path, capsys):
+    assert main(["demos", str(PICK_PLACE), "--out", str(tmp_path / "x.npz"), "--no-progress", *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and fragment in err and "Traceback" not in err
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_generate_defaults_to_the_last_stage_and_the_native_policy():
+    demos = generate(PICK_PLACE, episodes=1, seed=3)
+    assert demos.metadata["stage"] == "place" and demos.metadata["policy"].startswith("metaworld:")
