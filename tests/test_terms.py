@@ -12,7 +12,7 @@ from taskforge.terms import FEATURES, KERNELS, REWARD_TERMS, CompiledStage
 
 
 def features(**overrides) -> dict:
-    base = {name: (np.zeros(info.size) if info.size > 1 else 0.0) for name, info in FEATURES.items()}
+    base = {name: (0.0 if info.size == 1 else np.zeros(info.size or 4)) for name, info in FEATURES.items()}
     base.update(overrides)
     return base
 
