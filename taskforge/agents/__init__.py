@@ -14,7 +14,8 @@ with `make_vector_env` (SAME_STEP autoreset, needed for time-limit bootstrapping
 
 Modules, in reading order: `gae` (advantages), `normalization` (observation and reward
 statistics), `actions` (clip vs squash), `policies` (MLP / LSTM actor-critic), `storage` (rollout
-buffer and minibatches), `ppo` (the agent and the loss), `runtime` (vector env, threads).
+buffer and minibatches), `ppo` (the agent and the loss), `runtime` (vector env, threads), `bc`
+(warm start: behaviour cloning and value regression on demonstrations).
 """
 
 from taskforge.agents.actions import ClipGaussian, SquashGaussian

@@ -3,10 +3,11 @@
 Two kinds:
 
 * **Native**: a simulator suite's own scripted policy for its full task. For Meta-World, the
-  policy of `metaworld.policies.ENV_POLICY_MAP[env]`. Those read Meta-World's goal-*observable*
-  39-float observation, so they are fed `backend.native_observation()` (true goal, no noise),
-  never the agent's observation (goal possibly hidden, noise added). The action they return is
-  the agent's action (the env passes actions straight to Meta-World).
+  policy of `metaworld.policies.ENV_POLICY_MAP[env]` (per sub-task for MT10). Those read
+  Meta-World's goal-*observable* 39-float observation, so they are fed
+  `backend.native_observation()` (true goal, no noise), never the agent's observation (goal
+  possibly hidden, noise added). Their action is the agent's action (the env passes actions
+  straight to Meta-World).
 * **Waypoint planner** (`WaypointPlanner`): a closed-loop, stateless planner on the shared
   features (`tcp_pos`, `object_pos`, `goal_pos`, `gripper_opening`, `object_height`) that emits
   4-D Cartesian actions `(dx, dy, dz, grip)`. Every step it re-decides where the tool should go
@@ -19,18 +20,21 @@ convention the full task; earlier stages are easier versions of it) when the bac
 otherwise the planner with a behaviour inferred from the stage's success condition.
 
 Conventions (Meta-World's, checked in `SawyerXYZEnv.step`: the gripper actuators get
-`(a[3], -a[3])` and its pick-place policy closes with `+1`): `dx, dy, dz` in `[-1, 1]` move the
-tool by `action * gain_scale` metres per step; `grip` is **-1 open, +1 close**.
+`(a[3], -a[3])` and its pick-place policy closes with `+1`; xArm7's Cartesian mode is the same):
+`dx, dy, dz` in `[-1, 1]` are the backend's Cartesian step (Meta-World: 1 cm per unit per step;
+xArm7: `control.max_step_m`); `grip` is **-1 open, +1 close**.
 
-Adding a backend: a backend whose action is also a Cartesian delta + gripper reuses the planner
-by registering its numbers, e.g. in its own module
+Adding a backend: one entry in `_REGISTRY` below (backends may not import this package), or at
+run time
 
-    from taskforge.demos.policies import PlannerConfig, register_backend
-    register_backend("xarm7", planner=PlannerConfig(gain=20.0, grip_open=-1.0, grip_close=1.0))
+    from taskforge.demos import PlannerConfig, register_backend
+    register_backend("mybackend", planner=PlannerConfig(gain=5.0, hover=0.1))
 
-and may pass `native=` a factory `(env, stage) -> ScriptedPolicy | None` for its own scripted
-policies. A backend with another action space (joint targets) needs its own `native` factory
-(e.g. IK on the planner's Cartesian waypoints); `scripted_policy` refuses backends with neither.
+A backend whose action is a 4-D Cartesian delta + gripper reuses the planner with its own
+numbers (`planner=`); `native=` takes a factory `(env, stage) -> ScriptedPolicy | None` for the
+backend's own scripted policies. A backend with another action space (e.g. xArm7's joint mode)
+needs a `native` factory (e.g. mink IK on the planner's Cartesian waypoints); `scripted_policy`
+refuses it otherwise.
 """
 
 from __future__ import annotations
@@ -95,7 +99,7 @@ class PlannerConfig:
     tip the object over (a tipped puck rolls away)."""
     push_lead: float = 0.02
     """How far (m) ahead of the contact point the tool aims while pushing: sets the push speed
-    (`gain * push_lead` per step), slow enough that the object does not slide past the goal."""
+    (an action of `gain * push_lead`), slow enough that the object does not slide past the goal."""
     push_lateral_tolerance: float = 0.025
     """Sideways error (m) behind the object beyond which the tool goes back around it."""
     push_done: float = 0.01
@@ -273,6 +277,10 @@ class BackendPolicies:
 
 _REGISTRY: dict[str, BackendPolicies] = {
     "metaworld": BackendPolicies(native=_metaworld_native, planner=PlannerConfig()),
+    # xArm7 in `control.mode: cartesian` shares the action convention; Meta-World's numbers work
+    # as they are (measured: 20/20 episodes on each stage of tasks/xarm7/pick_place.yaml). In
+    # joint mode its action is 8-D, which `scripted_policy` refuses.
+    "xarm7": BackendPolicies(planner=PlannerConfig()),
 }
 
 
