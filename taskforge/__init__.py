@@ -6,8 +6,17 @@ Public API (stable):
     taskforge.SpecError                                        -> every user mistake
 """
 
-from taskforge.envs import TaskEnv, load_curriculum, load_task, make
-from taskforge.spec import SpecError, load_agent_spec
+import os
+
+# MuJoCo chooses its OpenGL backend once, when first imported. Without a display, its default
+# (GLFW) cannot render at all; software OSMesa (Debian's libosmesa6) works everywhere. A user
+# who set MUJOCO_GL (e.g. egl on a GPU machine) keeps their choice.
+if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
+    os.environ["MUJOCO_GL"] = "osmesa"
+    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+
+from taskforge.envs import TaskEnv, load_curriculum, load_task, make  # noqa: E402
+from taskforge.spec import SpecError, load_agent_spec  # noqa: E402
 
 __version__ = "0.1.0"
 

@@ -11,6 +11,8 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+import numpy as np
+
 from taskforge.spec import SpecError, SpecIssue, expected_one_of, read_yaml
 
 EXIT_USAGE = 2
@@ -136,6 +138,45 @@ def cmd_plot(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_render(args: argparse.Namespace) -> int:
+    from taskforge.envs import TaskEnv, load_task
+    from taskforge.rendering import render_episodes
+
+    target = Path(args.target)
+    if target.suffix in (".yaml", ".yml"):
+        from taskforge.demos import scripted_policy
+
+        env = TaskEnv(load_task(target), target, stage=args.stage, split=args.split)
+        policy = scripted_policy(env, args.stage)
+
+        def act(obs, start):
+            if start:
+                policy.reset(env)
+            return policy(env)
+
+        source = f"scripted ({policy.name})"
+    else:
+        from taskforge.evaluation.report import find_checkpoint, load_agent
+        from taskforge.spec import TaskSpec
+
+        agent, config, _ = load_agent(find_checkpoint(target))
+        phase = config["phases"][0]
+        env = TaskEnv(TaskSpec.model_validate(phase["task"]), phase["task_file"], stage=args.stage or phase["stages"][-1],
+                      split=args.split, privileged=agent.privileged_dim > 0)
+        state = agent.initial_state(1)
+
+        def act(obs, start):
+            nonlocal state
+            action, state = agent.act(obs[None], state, np.array([start]), deterministic=True)
+            return action[0]
+
+        source = f"policy at step {agent.global_step:,}"
+    frames, successes = render_episodes(env, act, Path(args.out), episodes=args.episodes, seed=args.seed, camera=args.camera,
+                                        width=args.width, height=args.height, max_frames=args.max_frames)
+    print(f"wrote {args.out}: {frames} frames, {source}, stage {env.stage}, success {sum(successes)}/{len(successes)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="taskforge", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -180,6 +221,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", help="write the report as JSON here")
     p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("render", help="record episodes off-screen (scripted for a task file, the policy for a run)")
+    p.add_argument("target", metavar="TASK.yaml|RUN_DIR")
+    p.add_argument("--out", default="render.gif", help="a .gif or .mp4 file (default render.gif)")
+    p.add_argument("--stage", help="default: the task's first stage (task file) or the run's last stage")
+    p.add_argument("--split", choices=["train", "test"], default="test")
+    p.add_argument("--episodes", type=int, default=1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--camera", help="a camera of the model (default: corner for Meta-World, front for xArm7)")
+    p.add_argument("--width", type=int, default=320)
+    p.add_argument("--height", type=int, default=240)
+    p.add_argument("--max-frames", type=int, help="stop after this many frames")
+    p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("plot", help="learning curves of a run as a PNG")
     p.add_argument("run_dir")

@@ -46,6 +46,10 @@ class Backend(Protocol):
         """The compiled MuJoCo model of a sub-task, for physics randomisation (changed in
         place); None for simulators that are not MuJoCo."""
 
+    @property
+    def data(self) -> mujoco.MjData | None:
+        """The current episode's MuJoCo state, for rendering (None: not a MuJoCo simulator)."""
+
     def object_geoms(self, task_name: str) -> list[str]:
         """Names of the main object's geoms (the default target of `object_size`)."""
 

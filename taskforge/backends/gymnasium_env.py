@@ -42,6 +42,8 @@ class GymnasiumBackend:
     def model(self, task_name: str) -> None:
         return None
 
+    data = None  # not a MuJoCo simulator: nothing to render off-screen
+
     def object_geoms(self, task_name: str) -> list[str]:
         return []
 

@@ -161,6 +161,11 @@ class MetaWorldBackend:
         one_hot[self._active_index] = 1.0
         return np.concatenate([obs, one_hot])
 
+    @property
+    def data(self) -> mujoco.MjData:
+        """The simulation state of the current episode's sub-task (for rendering)."""
+        return self._active.data
+
     def native_observation(self) -> np.ndarray:
         """Meta-World's own goal-observable observation after the last reset/step: 39 floats,
         the true (possibly overridden) goal in `obs[36:39]`, no noise, no sub-task one-hot. What

@@ -1,0 +1,64 @@
+"""`taskforge render`: record episodes off-screen as a GIF or MP4.
+
+MuJoCo picks its OpenGL backend when it is first imported, from `MUJOCO_GL`; importing
+taskforge sets `osmesa` (software; Debian's `libosmesa6`) when there is no display and the user
+chose nothing (`MUJOCO_GL=egl` is faster on a GPU machine).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import imageio.v2 as imageio
+import mujoco
+import numpy as np
+
+from taskforge.envs import TaskEnv
+from taskforge.spec import SpecError
+
+DEFAULT_CAMERAS = {"metaworld": "corner", "xarm7": "front"}
+
+
+def render_episodes(
+    env: TaskEnv,
+    act: Callable[[np.ndarray, bool], np.ndarray],
+    out: Path,
+    episodes: int = 1,
+    seed: int = 0,
+    camera: str | None = None,
+    width: int = 320,
+    height: int = 240,
+    fps: int = 20,
+    max_frames: int | None = None,
+) -> tuple[int, list[bool]]:
+    """Play `episodes` episodes with `act(obs, episode_start)` and write every control step as a
+    frame. Returns the number of frames and each episode's success."""
+    if env.backend.model(env.backend.task_names[0]) is None:
+        raise SpecError.single(env.file, "backend.type", f"rendering needs a MuJoCo backend, not {env.task.backend.type}")
+    if out.suffix.lower() not in (".gif", ".mp4"):
+        raise SpecError.single(out, "", "expected an output file ending in .gif or .mp4")
+    camera = camera or DEFAULT_CAMERAS.get(env.task.backend.type)
+    frames, successes = [], []
+    renderer: mujoco.Renderer | None = None
+    for k in range(episodes):
+        obs, _ = env.reset(seed=seed + k)
+        model = env.backend.model(env._episode["task"])
+        if renderer is None or renderer.model is not model:
+            renderer = mujoco.Renderer(model, height, width)
+            if camera is not None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
+                cams = [model.camera(i).name for i in range(model.ncam)]
+                raise SpecError.single(env.file, "camera", f"no camera '{camera}'; expected one of {', '.join(cams)}")
+        start, done, ever = True, False, False
+        while not done and (max_frames is None or len(frames) < max_frames):
+            renderer.update_scene(env.backend.data, camera=camera if camera is not None else -1)
+            frames.append(renderer.render().copy())
+            obs, _, terminated, truncated, info = env.step(act(obs, start))
+            start, done, ever = False, terminated or truncated, ever or info["success"]
+        successes.append(ever)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if out.suffix.lower() == ".gif":
+        imageio.mimsave(out, frames, duration=1000 / fps, loop=0)
+    else:
+        imageio.mimsave(out, frames, fps=fps, macro_block_size=1)
+    return len(frames), successes
