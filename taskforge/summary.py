@@ -50,6 +50,8 @@ def task_summary(task: TaskSpec) -> list[str]:
     lat = rand.action_latency
     if lat.max_steps:
         lines.append(f"  action latency: {lat.min_steps}..{lat.max_steps} steps")
+    if rand.action_backlash is not None:
+        lines.append(f"  action backlash width: {rand.action_backlash.describe()}")
     return lines
 
 

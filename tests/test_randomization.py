@@ -114,3 +114,27 @@ def test_latency_delays_actions_by_the_drawn_number_of_steps():
     latency.reset(np.random.default_rng(0))
     out = [latency(np.array([float(i)]))[0] for i in range(1, 6)]
     assert out == [0.0, 0.0, 1.0, 2.0, 3.0]
+
+
+def test_backlash_holds_within_the_play_and_drags_beyond_it():
+    from taskforge.randomization import ActionBacklash
+
+    backlash = ActionBacklash(Distribution(dist="uniform", low=0.4, high=0.4), 1)
+    backlash.reset(np.random.default_rng(0))
+    inputs = [0.1, 0.3, 0.5, 0.4, 0.2, 0.0, -0.5]
+    out = [round(float(backlash(np.array([x]))[0]), 6) for x in inputs]
+    # play of ±0.2: nothing until the input is 0.2 away, then the output trails by 0.2
+    assert out == [0.0, 0.1, 0.3, 0.3, 0.3, 0.2, -0.3]
+
+
+def test_backlash_width_is_drawn_per_episode_and_off_by_default():
+    from taskforge.randomization import ActionBacklash
+
+    off = ActionBacklash(None, 2)
+    off.reset(np.random.default_rng(0))
+    np.testing.assert_array_equal(off(np.array([0.01, -0.01])), [0.01, -0.01])
+    on = ActionBacklash(Distribution(dist="uniform", low=0.0, high=0.2), 4)
+    on.reset(np.random.default_rng(1))
+    first = on.half.copy()
+    on.reset(np.random.default_rng(2))
+    assert not np.array_equal(first, on.half) and (on.half <= 0.1).all()

@@ -1,7 +1,7 @@
 """The Gymnasium env that joins a backend, a stage's reward terms and success condition, and
 the task's randomisation.
 
-Per step: clip action -> action noise -> latency -> backend.step -> features -> success ->
+Per step: clip action -> action noise -> latency -> backlash -> backend.step -> features -> success ->
 reward terms -> observation noise -> hide goal. Per reset: choose sub-task and goal from the
 env's seeded generator -> restore+draw physics -> reset noise/latency -> backend.reset.
 """
@@ -16,7 +16,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from taskforge.backends import Backend, GoalOverride, Split, make_backend
-from taskforge.randomization import ActionLatency, AdditiveNoise, PhysicsRandomizer
+from taskforge.randomization import ActionBacklash, ActionLatency, AdditiveNoise, PhysicsRandomizer
 from taskforge.spec import SpecError, TaskSpec, expected_one_of
 from taskforge.terms import FEATURES, CompiledStage, Features
 
@@ -71,6 +71,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._obs_noise = AdditiveNoise(rand.observation_noise, self.backend.obs_size)
         self._act_noise = AdditiveNoise(rand.action_noise, n_act)
         self._latency = ActionLatency(rand.action_latency, n_act)
+        self._backlash = ActionBacklash(rand.action_backlash, n_act)
         self._hide_goal = not task.goals.observable
 
         self.action_space = Box(-1.0, 1.0, (n_act,), np.float32)
@@ -137,6 +138,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._obs_noise.reset(rng)
         self._act_noise.reset(rng)
         self._latency.reset(rng)
+        self._backlash.reset(rng)
 
         stage = self.stages[self.stage]
         goal = GoalOverride(stage.spec.goal.height, stage.spec.goal.distance_scale)
@@ -154,7 +156,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
 
     def step(self, action: np.ndarray):
         chosen = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
-        applied = self._latency(self._act_noise(chosen, self.np_random))
+        applied = self._backlash(self._latency(self._act_noise(chosen, self.np_random)))
         obs, ended = self.backend.step(np.clip(applied, -1.0, 1.0))
         self._t += 1
 

@@ -2,7 +2,7 @@
 action noise, and action latency. Everything draws from a generator handed in by the env."""
 
 from taskforge.randomization.distributions import sample
-from taskforge.randomization.noise import ActionLatency, AdditiveNoise
+from taskforge.randomization.noise import ActionBacklash, ActionLatency, AdditiveNoise
 from taskforge.randomization.physics import PhysicsRandomizer
 
-__all__ = ["ActionLatency", "AdditiveNoise", "PhysicsRandomizer", "sample"]
+__all__ = ["ActionBacklash", "ActionLatency", "AdditiveNoise", "PhysicsRandomizer", "sample"]

@@ -8,7 +8,7 @@ from collections import deque
 import numpy as np
 
 from taskforge.randomization.distributions import sample
-from taskforge.spec import LatencySpec, NoiseSpec
+from taskforge.spec import Distribution, LatencySpec, NoiseSpec
 
 
 class AdditiveNoise:
@@ -52,3 +52,26 @@ class ActionLatency:
             return action
         self._queue.append(action)
         return self._queue.popleft()
+
+
+class ActionBacklash:
+    """The classic backlash (play) operator per action dimension: the output stays put while the
+    input moves within ±width/2 of it, and is dragged along, half a width behind, beyond that.
+    Policies that chatter around a set point get no motion, as with worn gears or a cable drive.
+    The width is drawn once per episode; the output starts at the zero action."""
+
+    def __init__(self, width: Distribution | None, size: int):
+        self.width_dist = width
+        self.half = np.zeros(size)
+        self._out = np.zeros(size)
+
+    def reset(self, rng: np.random.Generator) -> None:
+        if self.width_dist is not None:
+            self.half = np.maximum(sample(self.width_dist, rng, self.half.size), 0.0) / 2
+        self._out = np.zeros_like(self.half)
+
+    def __call__(self, action: np.ndarray) -> np.ndarray:
+        if self.width_dist is None:
+            return action
+        self._out = np.clip(self._out, action - self.half, action + self.half)
+        return self._out.copy()

@@ -392,6 +392,10 @@ class RandomizationSpec(StrictModel):
     observation_noise: NoiseSpec = NoiseSpec()
     action_noise: NoiseSpec = NoiseSpec()
     action_latency: LatencySpec = LatencySpec()
+    action_backlash: Distribution | None = None
+    """Width of a backlash-like dead band on each action dimension (action units), drawn once per
+    episode: the applied command only moves once the requested one has moved more than half the
+    width away from it, as with play in a gearbox. Negative draws count as 0."""
 
 
 # --- goals ---------------------------------------------------------------------------------
