@@ -48,15 +48,21 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--steps", type=int, default=2_000_000)
     parser.add_argument("--chunk-steps", type=int, default=200_000)
+    parser.add_argument("--report-only", action="store_true", help="summarise the runs so far, train nothing")
     args = parser.parse_args()
 
     runs = {}
     for seed in args.seeds:
         for variant in VARIANTS:
-            start = time.perf_counter()
-            step = advance(variant, seed, args.steps, args.chunk_steps)
-            print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
             run_dir = RUNS / f"{variant}-seed{seed}"
+            if args.report_only:
+                if not (run_dir / "checkpoint.pt").exists():
+                    continue
+                step = load_checkpoint(run_dir / "checkpoint.pt")["agent"]["global_step"]
+            else:
+                start = time.perf_counter()
+                step = advance(variant, seed, args.steps, args.chunk_steps)
+                print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
             metrics = read_jsonl(run_dir / "metrics.jsonl")
             runs[f"{variant}-seed{seed}"] = {
                 "variant": variant, "seed": seed, "steps_done": step,
@@ -73,8 +79,9 @@ def main() -> None:
             row.append(f"{np.mean(vals):.2f} (n={len(vals)})" if vals else "-")
         rows.append(row)
     print_table(["env steps", "curriculum: held-out place success", "flat: held-out place success"], rows)
-    remaining = sum(max(0, args.steps - r["steps_done"]) for r in runs.values())
-    print(f"remaining: {remaining:,} env steps over {len(runs)} runs")
+    missing = len(args.seeds) * len(VARIANTS) - len(runs)
+    remaining = sum(max(0, args.steps - r["steps_done"]) for r in runs.values()) + missing * args.steps
+    print(f"remaining: {remaining:,} env steps ({len(runs)} runs started, {missing} not started)")
     write_result("pick_place_curriculum", {"seeds": args.seeds, "steps": args.steps, "runs": runs, "remaining_steps": remaining,
                                            "complete": remaining == 0})
 
