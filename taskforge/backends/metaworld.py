@@ -23,6 +23,7 @@ from gymnasium.spaces import Box
 from metaworld.env_dict import ALL_V3_ENVIRONMENTS, MT10_V3
 from metaworld.types import Task
 
+from taskforge.atomic import atomic_write
 from taskforge.backends.base import GoalOverride, Split
 from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
 from taskforge.spec.task import GoalsSpec, MetaWorldBackendSpec
@@ -53,10 +54,7 @@ def ml1_goals(env_name: str, seed: int) -> tuple[tuple[Task, ...], tuple[Task, .
     benchmark = metaworld.ML1(env_name, seed=seed)
     goals = tuple(benchmark.train_tasks), tuple(benchmark.test_tasks)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        tmp.write_bytes(pickle.dumps(goals))
-        os.replace(tmp, path)  # atomic: concurrent workers never read a torn file
+        atomic_write(path, lambda f: f.write(pickle.dumps(goals)))  # workers never read a torn file
     except OSError:
         pass  # a read-only home is fine: the goals are still in memory
     return goals

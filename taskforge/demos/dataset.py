@@ -23,14 +23,13 @@ File layout (`np.savez_compressed`; `load` checks it):
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from taskforge.atomic import atomic_write
 from taskforge.demos.policies import ScriptedPolicy, Source, scripted_policy
 from taskforge.envs import TaskEnv, make
 from taskforge.spec import SpecError
@@ -199,19 +198,8 @@ def generate(
 def save(demos: Demos, path: str | Path) -> Path:
     """Write atomically: a temp file in the same folder, fsync, then `os.replace`, so a kill
     leaves the old file or the new one, never a torn one."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **demos.arrays(), metadata=np.array(json.dumps(demos.metadata)))
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    metadata = np.array(json.dumps(demos.metadata))
+    return atomic_write(path, lambda f: np.savez_compressed(f, **demos.arrays(), metadata=metadata))
 
 
 def load(path: str | Path) -> Demos:

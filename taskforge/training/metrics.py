@@ -9,7 +9,7 @@ from typing import Any
 
 from torch.utils.tensorboard import SummaryWriter
 
-from taskforge.training.checkpoint import atomic_write_bytes
+from taskforge.atomic import atomic_write
 
 
 class JsonlLog:
@@ -45,7 +45,7 @@ def truncate_after(path: Path, step: int) -> None:
     """On resume, drop records written after the checkpoint (they will be written again)."""
     kept = [r for r in read_jsonl(path) if r.get("step", 0) <= step]
     text = "".join(json.dumps(r) + "\n" for r in kept)
-    atomic_write_bytes(path, lambda f: f.write(text.encode()))
+    atomic_write(path, lambda f: f.write(text.encode()))
 
 
 class MetricsLogger:
