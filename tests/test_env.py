@@ -131,7 +131,7 @@ def test_episode_length_follows_the_stage():
 def test_privileged_info_has_velocity_goal_and_physics_draws():
     env = taskforge.make(PICK_PLACE, stage="pick", seed=0, privileged=True)
     _, info = env.reset()
-    n_draws = env._randomizer("pick-place-v3").draw_size
+    n_draws = env._randomizers["pick-place-v3"].draw_size
     assert info["privileged"].shape == (3 + 3 + n_draws,) and n_draws > 10
 
 

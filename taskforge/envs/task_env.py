@@ -62,9 +62,13 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self.stages = {s.name: CompiledStage(s, file, f"stages[{i}]") for i, s in enumerate(task.stages)}
         self.stage = self._check_stage(stage or task.stages[0].name)
         self.task_name = self._check_task_name(task_name)
-        self._randomizers: dict[str, PhysicsRandomizer] = {}
-        for name in self.backend.task_names:
-            self._randomizer(name)  # build all now: bad `names` fail at construction, not mid-run
+        # One per sub-task with a MuJoCo model (other backends' checks reject physics terms),
+        # built now so that bad `names` fail at construction, not mid-run.
+        self._randomizers: dict[str, PhysicsRandomizer] = {
+            name: PhysicsRandomizer(model, task.randomization.physics, self.backend.object_geoms(name), self.file)
+            for name in self.backend.task_names
+            if (model := self.backend.model(name)) is not None
+        }
 
         rand = task.randomization
         n_act = self.backend.action_space.shape[0]
@@ -95,23 +99,6 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             raise SpecError.single(self.file, "task", msg)
         return name
 
-    def _randomizer(self, task_name: str) -> PhysicsRandomizer | None:
-        """The sub-task's physics randomiser; None for backends without a MuJoCo model (their
-        check rejects physics terms)."""
-        model = self.backend.model(task_name)
-        if model is None:
-            return None
-        rnd = self._randomizers.get(task_name)
-        if rnd is None:
-            rnd = PhysicsRandomizer(
-                model,
-                self.task.randomization.physics,
-                self.backend.object_geoms(task_name),
-                self.file,
-            )
-            self._randomizers[task_name] = rnd
-        return rnd
-
     @property
     def max_episode_steps(self) -> int:
         return self.stages[self.stage].spec.max_episode_steps or self.task.max_episode_steps
@@ -133,7 +120,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         if goal_index is None:
             goal_index = int(rng.integers(self.backend.num_goals(self.split)))
 
-        randomizer = self._randomizer(name)
+        randomizer = self._randomizers.get(name)
         physics_draw = randomizer.apply(rng) if randomizer else np.zeros(0)
         self._obs_noise.reset(rng)
         self._act_noise.reset(rng)
