@@ -122,8 +122,11 @@ def cmd_eval(args: argparse.Namespace) -> int:
     from taskforge.training.checkpoint import save_json
 
     if args.episodes < 1:
-        raise SpecError.single("--episodes", "", f"expected at least 1 episode (got {args.episodes})")
-    report = evaluate_run(args.run, split=args.split, episodes=args.episodes, stages=args.stage, seed=args.seed)
+        raise SpecError.single("--episodes", "", f"expected at least 1 trial (got {args.episodes})")
+    if args.trial_episodes is not None and args.trial_episodes < 1:
+        raise SpecError.single("--trial-episodes", "", f"expected at least 1 episode per trial (got {args.trial_episodes})")
+    report = evaluate_run(args.run, split=args.split, trials=args.episodes, stages=args.stage, seed=args.seed,
+                          trial_episodes=args.trial_episodes)
     print(format_table(report))
     if args.out:
         save_json(report, Path(args.out))
@@ -132,9 +135,14 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from taskforge.evaluation.plot import plot_run
+    from taskforge.evaluation.plot import plot_adaptation, plot_run
 
-    print(f"wrote {plot_run(args.run_dir, args.out)}")
+    reports = [Path(s) for s in args.sources if s.endswith(".json")]
+    if reports and len(reports) < len(args.sources):
+        raise SpecError.single(args.sources[0], "", "expected either one run directory or only eval reports (.json)")
+    if not reports and len(args.sources) > 1:
+        raise SpecError.single(args.sources[1], "", "expected one run directory (several sources must be eval reports)")
+    print(f"wrote {plot_adaptation(reports, args.out) if reports else plot_run(args.sources[0], args.out)}")
     return 0
 
 
@@ -159,10 +167,13 @@ def cmd_render(args: argparse.Namespace) -> int:
         from taskforge.evaluation.report import find_checkpoint, load_agent
         from taskforge.spec import TaskSpec
 
+        from taskforge.agents import wrap_for_training
+
         agent, config, _ = load_agent(find_checkpoint(target))
         phase = config["phases"][0]
         env = TaskEnv(TaskSpec.model_validate(phase["task"]), phase["task_file"], stage=args.stage or phase["stages"][-1],
                       split=args.split, privileged=agent.privileged_dim > 0)
+        env = wrap_for_training(env, agent.spec)  # RL²: an "episode" is a whole trial
         state = agent.initial_state(1)
 
         def act(obs, start):
@@ -216,7 +227,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("eval", help="evaluate a trained policy on held-out goals")
     p.add_argument("run", metavar="RUN_DIR_OR_CHECKPOINT")
     p.add_argument("--split", choices=["train", "test"], default="test")
-    p.add_argument("--episodes", type=int, default=20, help="episodes per task and stage (default 20)")
+    p.add_argument("--episodes", type=int, default=20,
+                   help="trials per task and stage, trial k on goal k of the split (default 20); a trial is "
+                        "--trial-episodes episodes from a fresh recurrent state")
+    p.add_argument("--trial-episodes", type=int,
+                   help="episodes per trial (default: the agent's: K for RL², 1 for PPO; K > 1 for PPO gives the "
+                        "memoryless baseline's flat adaptation curve)")
     p.add_argument("--stage", action="append", help="only these stages (repeatable)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", help="write the report as JSON here")
@@ -235,9 +251,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-frames", type=int, help="stop after this many frames")
     p.set_defaults(func=cmd_render)
 
-    p = sub.add_parser("plot", help="learning curves of a run as a PNG")
-    p.add_argument("run_dir")
-    p.add_argument("--out", help="default: RUN_DIR/curves.png")
+    p = sub.add_parser("plot", help="learning curves of a run, or adaptation curves of eval reports, as a PNG")
+    p.add_argument("sources", nargs="+", metavar="RUN_DIR|REPORT.json",
+                   help="a run directory (learning curves), or one or more `taskforge eval --out` reports "
+                        "(success per episode of the trial, e.g. RL² next to PPO)")
+    p.add_argument("--out", help="default: RUN_DIR/curves.png, or adaptation.png beside the first report")
     p.set_defaults(func=cmd_plot)
     return parser
 

@@ -14,6 +14,7 @@ import imageio.v2 as imageio
 import mujoco
 import numpy as np
 
+from taskforge.agents import RL2Trial
 from taskforge.envs import TaskEnv
 from taskforge.spec import SpecError
 
@@ -21,7 +22,7 @@ DEFAULT_CAMERAS = {"metaworld": "corner", "xarm7": "front"}
 
 
 def render_episodes(
-    env: TaskEnv,
+    env: TaskEnv | RL2Trial,
     act: Callable[[np.ndarray, bool], np.ndarray],
     out: Path,
     episodes: int = 1,
@@ -33,29 +34,32 @@ def render_episodes(
     max_frames: int | None = None,
 ) -> tuple[int, list[bool]]:
     """Play `episodes` episodes with `act(obs, episode_start)` and write every control step as a
-    frame. Returns the number of frames and each episode's success."""
-    if env.backend.model(env.backend.task_names[0]) is None:
-        raise SpecError.single(env.file, "backend.type", f"rendering needs a MuJoCo backend, not {env.task.backend.type}")
+    frame. Returns the number of frames and each episode's success. For an RL² policy `env` is
+    the `RL2Trial` around the `TaskEnv`: an "episode" is then a whole trial, and its success is
+    that of the trial's last episode."""
+    task_env: TaskEnv = env.unwrapped
+    if task_env.backend.model(task_env.backend.task_names[0]) is None:
+        raise SpecError.single(task_env.file, "backend.type", f"rendering needs a MuJoCo backend, not {task_env.task.backend.type}")
     if out.suffix.lower() not in (".gif", ".mp4"):
         raise SpecError.single(out, "", "expected an output file ending in .gif or .mp4")
-    camera = camera or DEFAULT_CAMERAS.get(env.task.backend.type)
+    camera = camera or DEFAULT_CAMERAS.get(task_env.task.backend.type)
     frames, successes = [], []
     renderer: mujoco.Renderer | None = None
     for k in range(episodes):
         obs, _ = env.reset(seed=seed + k)
-        model = env.backend.model(env._episode["task"])
+        model = task_env.backend.model(task_env._episode["task"])
         if renderer is None or renderer.model is not model:
             renderer = mujoco.Renderer(model, height, width)
             if camera is not None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
                 cams = [model.camera(i).name for i in range(model.ncam)]
-                raise SpecError.single(env.file, "camera", f"no camera '{camera}'; expected one of {', '.join(cams)}")
-        start, done, ever = True, False, False
+                raise SpecError.single(task_env.file, "camera", f"no camera '{camera}'; expected one of {', '.join(cams)}")
+        start, done, ever, info = True, False, False, {}
         while not done and (max_frames is None or len(frames) < max_frames):
-            renderer.update_scene(env.backend.data, camera=camera if camera is not None else -1)
+            renderer.update_scene(task_env.backend.data, camera=camera if camera is not None else -1)
             frames.append(renderer.render().copy())
             obs, _, terminated, truncated, info = env.step(act(obs, start))
             start, done, ever = False, terminated or truncated, ever or info["success"]
-        successes.append(ever)
+        successes.append(bool(info["trial_successes"][-1]) if "trial_successes" in info else ever)
     out.parent.mkdir(parents=True, exist_ok=True)
     if out.suffix.lower() == ".gif":
         imageio.mimsave(out, frames, duration=1000 / fps, loop=0)

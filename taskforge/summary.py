@@ -61,8 +61,10 @@ def agent_summary(agent: AgentSpec) -> list[str]:
         f"agent {agent.name}: {agent.algo}, {p.type} policy {p.hidden_sizes} ({p.activation}), "
         f"actions {p.action_bounds}{', asymmetric critic' if agent.asymmetric_critic else ''}",
         f"  {ppo.num_envs} envs x {ppo.rollout_steps} steps per update, {ppo.update_epochs} epochs x "
-        f"{ppo.num_minibatches} minibatches, lr {ppo.learning_rate:g}, gamma {ppo.gamma:g}, lambda {ppo.gae_lambda:g}",
-    ]
+        f"{ppo.num_minibatches} minibatches, lr {ppo.learning_rate:g}, gamma {ppo.gamma:g}, lambda {ppo.gae_lambda:g}"
+        + (f", BPTT {ppo.bptt_length} steps" if p.type != "mlp" and ppo.bptt_length else ""),
+    ] + ([f"  RL² trials of {agent.trial_episodes} episodes per goal; input obs + previous action, reward, episode start"]
+         if agent.algo == "rl2" else [])
 
 
 def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
@@ -77,7 +79,7 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
         lines.append(f"  phase {i + 1}: {phase.task.name} ({phase.task_file}): {' -> '.join(phase.stages)}")
     lines.append(
         f"  evaluate every {spec.evaluation.every_steps:,} steps on {spec.evaluation.episodes} "
-        f"{spec.evaluation.split} episodes; checkpoint every {spec.checkpoint.every_steps:,} steps"
+        f"{spec.evaluation.split} {'trials' if cur.agent.algo == 'rl2' else 'episodes'}; checkpoint every {spec.checkpoint.every_steps:,} steps"
     )
     ws = spec.warm_start
     if ws is not None:

@@ -133,7 +133,7 @@ def test_one_update_lowers_the_losses_on_its_batch():
     envs.close()
 
     def full_batch_loss():
-        (batch,) = agent.buffer.minibatches(1, torch.Generator(), whole_sequences=False)
+        (batch,) = agent.buffer.minibatches(1, torch.Generator(), recurrent=False)
         with torch.no_grad():
             return ppo_loss(agent.policy, batch, spec.ppo, torch.Generator())
 
@@ -194,7 +194,7 @@ def test_state_dict_round_trips_through_torch_save_and_resumes_exactly(tmp_path)
 
 def test_lstm_agent_runs_end_to_end_with_episode_ends_inside_the_rollout():
     spec = agent_spec(
-        policy={"type": "lstm", "hidden_sizes": [32], "lstm_hidden_size": 16},
+        policy={"type": "lstm", "hidden_sizes": [32], "recurrent_size": 16},
         ppo={**SMALL_PPO, "num_minibatches": 2},
     )
     envs = pendulum_envs(spec, max_episode_steps=20)  # 32-step rollouts hold episode ends
@@ -203,7 +203,7 @@ def test_lstm_agent_runs_end_to_end_with_episode_ends_inside_the_rollout():
     envs.close()
     assert agent.buffer.truncated.any() and agent.buffer.episode_starts[1:].any()
     assert all(np.isfinite(value) for m in metrics for value in m.values())
-    assert agent.buffer.initial_state is not None and agent.buffer.initial_state.actor[0].abs().sum() > 0
+    assert len(agent.buffer.chunk_states) == 1 and agent.buffer.chunk_states[0].actor[0].abs().sum() > 0
 
     state = agent.initial_state(3)
     obs = np.zeros((3, 3), dtype=np.float32)
@@ -248,7 +248,7 @@ def test_truncation_bootstraps_from_the_final_observation_and_privileged_vector(
 
 @pytest.mark.parametrize("policy_type", ["mlp", "lstm"])
 def test_asymmetric_critic_trains_on_an_env_with_privileged_info(policy_type):
-    policy = {"type": policy_type, "hidden_sizes": [32], "lstm_hidden_size": 16}
+    policy = {"type": policy_type, "hidden_sizes": [32], "recurrent_size": 16}
     spec = agent_spec(policy=policy, ppo=SMALL_PPO, asymmetric_critic=True)
     envs = pendulum_envs(spec, max_episode_steps=20, privileged=True)
     agent = make_agent(spec, envs, privileged=True)
@@ -296,7 +296,7 @@ def test_async_vector_env_and_on_step_callback():
 
 @pytest.mark.parametrize("policy", [{"type": "mlp"}, {"type": "lstm", "action_bounds": "squash"}])
 def test_same_seed_gives_identical_parameters(policy):
-    spec = agent_spec(policy={**policy, "hidden_sizes": [32], "lstm_hidden_size": 16}, ppo=SMALL_PPO)
+    spec = agent_spec(policy={**policy, "hidden_sizes": [32], "recurrent_size": 16}, ppo=SMALL_PPO)
 
     def run(seed: int) -> list[torch.Tensor]:
         envs = pendulum_envs(spec, max_episode_steps=20)

@@ -203,7 +203,7 @@ def test_squash_needs_a_finite_box():
 
 def lstm_policy() -> ActorCritic:
     torch.manual_seed(0)
-    spec = PolicySpec(type="lstm", hidden_sizes=[16], lstm_hidden_size=8)
+    spec = PolicySpec(type="lstm", hidden_sizes=[16], recurrent_size=8)
     return ActorCritic(spec, obs_dim=3, critic_dim=3, action_space=ACTION_SPACE)
 
 
@@ -211,7 +211,7 @@ def test_lstm_state_is_reset_where_an_episode_starts():
     """Acting on an obs sequence after other steps, with episode_start on its first step, gives
     exactly what the same sequence gives from a fresh state."""
     agent = PPOAgent(
-        agent_spec(policy={"type": "lstm", "hidden_sizes": [16], "lstm_hidden_size": 8}, ppo={"num_minibatches": 4}),
+        agent_spec(policy={"type": "lstm", "hidden_sizes": [16], "recurrent_size": 8}, ppo={"num_minibatches": 4}),
         OBS_SPACE,
         ACTION_SPACE,
     )
@@ -253,27 +253,31 @@ def test_lstm_sequence_evaluation_resets_at_episode_starts_inside_the_sequence()
     torch.testing.assert_close(value[k:, :1], suffix_value, rtol=0, atol=1e-6)
 
 
-def test_sequence_minibatches_keep_whole_env_sequences_with_their_initial_state():
-    T, N = 7, 6
-    buffer = RolloutBuffer(num_steps=T, num_envs=N, obs_dim=2, critic_dim=2, action_dim=1)
+@pytest.mark.parametrize("chunk_length", [None, 4])
+def test_sequence_minibatches_keep_whole_chunks_with_the_state_they_started_from(chunk_length):
+    T, N = 8, 6
+    L = chunk_length or T
+    buffer = RolloutBuffer(num_steps=T, num_envs=N, obs_dim=2, critic_dim=2, action_dim=1, chunk_length=chunk_length)
     steps, envs = torch.meshgrid(torch.arange(T), torch.arange(N), indexing="ij")
     buffer.obs = torch.stack([steps, envs], dim=-1).float()  # obs[t, e] = (t, e)
     buffer.returns = envs.float()
-    marker = torch.arange(N).float().view(1, N, 1).expand(1, N, 4)
-    buffer.initial_state = RecurrentState((marker, marker + 100), (marker + 200, marker + 300))
+    for t in range(T):  # the state recorded before step t marks (t, env)
+        marker = (1000 * t + torch.arange(N)).float().view(1, N, 1).expand(1, N, 4)
+        buffer.record_state(t, RecurrentState((marker, marker + 100), (marker + 200, marker + 300)))
+    assert len(buffer.chunk_states) == T // L
 
-    seen: list[int] = []
-    for mb in buffer.minibatches(3, torch.Generator().manual_seed(0), whole_sequences=True):
-        assert mb.obs.shape == (T, 2, 2)
+    seen: list[tuple[int, int]] = []
+    for mb in buffer.minibatches(3, torch.Generator().manual_seed(0), recurrent=True):
+        assert mb.obs.shape[0] == L
         for j in range(mb.obs.shape[1]):
-            env = int(mb.obs[0, j, 1])
-            assert mb.obs[:, j, 0].tolist() == list(range(T))  # every step, in order
+            start, env = int(mb.obs[0, j, 0]), int(mb.obs[0, j, 1])
+            assert mb.obs[:, j, 0].tolist() == list(range(start, start + L))  # every step of the chunk, in order
             assert (mb.obs[:, j, 1] == env).all() and (mb.returns[:, j] == env).all()
-            assert mb.state.actor[0][0, j, 0] == env and mb.state.critic[1][0, j, 0] == env + 300
-            seen.append(env)
-    assert sorted(seen) == list(range(N))  # the minibatches partition the envs
+            assert mb.state.actor[0][0, j, 0] == 1000 * start + env and mb.state.critic[1][0, j, 0] == 1000 * start + env + 300
+            seen.append((start, env))
+    assert sorted(seen) == [(c * L, e) for c in range(T // L) for e in range(N)]  # the minibatches partition the chunks
 
-    flat_batches = buffer.minibatches(4, torch.Generator().manual_seed(0), whole_sequences=False)
+    flat_batches = buffer.minibatches(4, torch.Generator().manual_seed(0), recurrent=False)
     flat = [mb.obs.reshape(-1, 2) for mb in flat_batches]
     pairs = sorted(map(tuple, torch.cat(flat).int().tolist()))
     assert pairs == [(t, e) for t in range(T) for e in range(N)]  # flat minibatches: each step once
@@ -281,14 +285,14 @@ def test_sequence_minibatches_keep_whole_env_sequences_with_their_initial_state(
 
 # ------------------------------------------------------------------------------- construction
 
-@pytest.mark.parametrize("policy_type", ["mlp", "lstm"])
+@pytest.mark.parametrize("policy_type", ["mlp", "lstm", "gru"])
 def test_asymmetric_critic_input_is_obs_plus_privileged_and_actor_input_is_obs(policy_type):
     spec = agent_spec(
         policy={"type": policy_type, "hidden_sizes": [16]}, ppo={"num_minibatches": 4}, asymmetric_critic=True
     )
     policy = PPOAgent(spec, OBS_SPACE, ACTION_SPACE, privileged_dim=5).policy
     def input_size(torso) -> int:
-        return torso.lstm.input_size if policy_type == "lstm" else torso.net[0].in_features
+        return torso.net[0].in_features if policy_type == "mlp" else torso.core.input_size
 
     assert input_size(policy.actor) == policy.actor.in_dim == 3
     assert input_size(policy.critic) == policy.critic.in_dim == 3 + 5

@@ -13,9 +13,10 @@ with `make_vector_env` (SAME_STEP autoreset, needed for time-limit bootstrapping
         metrics = agent.update()
 
 Modules, in reading order: `gae` (advantages), `normalization` (observation and reward
-statistics), `actions` (clip vs squash), `policies` (MLP / LSTM actor-critic), `storage` (rollout
-buffer and minibatches), `ppo` (the agent and the loss), `runtime` (vector env, threads), `bc`
-(warm start: behaviour cloning and value regression on demonstrations).
+statistics), `actions` (clip vs squash), `policies` (MLP / LSTM / GRU actor-critic), `storage`
+(rollout buffer and minibatches), `ppo` (the agent and the loss), `rl2` (RL²: trials and the
+augmented observation), `runtime` (vector env, threads), `bc` (warm start: behaviour cloning and
+value regression on demonstrations).
 """
 
 from taskforge.agents.actions import ClipGaussian, SquashGaussian
@@ -23,6 +24,7 @@ from taskforge.agents.gae import compute_gae
 from taskforge.agents.normalization import ObservationNormalizer, RewardScaler, RunningMeanStd
 from taskforge.agents.policies import ActorCritic, RecurrentState
 from taskforge.agents.ppo import PPOAgent, PPOLoss, explained_variance, ppo_loss
+from taskforge.agents.rl2 import RL2Trial, agent_observation_space, trial_observation_space, wrap_for_training
 from taskforge.agents.runtime import check_same_step_autoreset, make_vector_env, set_torch_threads
 from taskforge.agents.storage import Minibatch, RolloutBuffer
 
@@ -33,15 +35,19 @@ __all__ = [
     "ObservationNormalizer",
     "PPOAgent",
     "PPOLoss",
+    "RL2Trial",
     "RecurrentState",
     "RewardScaler",
     "RolloutBuffer",
     "RunningMeanStd",
     "SquashGaussian",
+    "agent_observation_space",
     "check_same_step_autoreset",
     "compute_gae",
     "explained_variance",
     "make_vector_env",
     "ppo_loss",
     "set_torch_threads",
+    "trial_observation_space",
+    "wrap_for_training",
 ]

@@ -1,11 +1,11 @@
-"""Actor-critic networks: separate actor and critic bodies, MLP or LSTM, Gaussian actions.
+"""Actor-critic networks: separate actor and critic bodies, MLP, LSTM or GRU, Gaussian actions.
 
 The actor and the critic never share weights (core detail #13, continuous detail #4): value
 gradients would otherwise shape the actor's features (and memory), which hurts continuous control
 (Andrychowicz et al., 2021), and an asymmetric critic reads inputs the actor must not see.
 
 Every method takes inputs shaped `[T, N, features]` (T steps of N env sequences): a rollout
-step is `T = 1`, a recurrent minibatch is `T = rollout_steps`, and a feed-forward minibatch is
+step is `T = 1`, a recurrent minibatch is `T = bptt_length`, and a feed-forward minibatch is
 `[1, batch, features]`, so one code path serves all three.
 """
 
@@ -24,20 +24,25 @@ from taskforge.spec.agent import PolicySpec
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "relu": nn.ReLU, "elu": nn.ELU}
 
-LSTMHidden = tuple[torch.Tensor, torch.Tensor]
+Hidden = tuple[torch.Tensor, ...]
+"""A recurrent core's state: `(h, c)` for an LSTM, `(h,)` for a GRU; each `[1, num_envs, size]`."""
 
 
 class RecurrentState(NamedTuple):
-    """The LSTM `(h, c)` of the actor and of the critic, each tensor `[1, num_envs, hidden]`."""
+    """The recurrent state of the actor and of the critic."""
 
-    actor: LSTMHidden
-    critic: LSTMHidden
+    actor: Hidden
+    critic: Hidden
 
     def select(self, env_idx: torch.Tensor) -> RecurrentState:
         """The state of a subset of envs (minibatch sequences, truncation bootstraps)."""
+        return RecurrentState(*(tuple(part[:, env_idx] for part in net) for net in self))
+
+    @staticmethod
+    def concat(states: list[RecurrentState]) -> RecurrentState:
+        """Join states of disjoint env batches along the env axis (chunks of a rollout)."""
         return RecurrentState(
-            actor=(self.actor[0][:, env_idx], self.actor[1][:, env_idx]),
-            critic=(self.critic[0][:, env_idx], self.critic[1][:, env_idx]),
+            *(tuple(torch.cat(parts, dim=1) for parts in zip(*nets)) for nets in zip(*states))
         )
 
 
@@ -72,45 +77,47 @@ class MLPTorso(nn.Module):
         return self.net(x), state
 
 
-class LSTMTorso(nn.Module):
-    """An LSTM over the raw input, then an MLP (as SB3's RecurrentPPO for vector observations).
+class RecurrentTorso(nn.Module):
+    """An LSTM or GRU over the raw input, then an MLP (as SB3's RecurrentPPO for vector
+    observations). RL² uses the GRU (Duan et al., 2016).
 
-    The LSTM is stepped one time step at a time so the hidden state can be zeroed wherever an
-    episode starts, both when acting and when re-running whole sequences in the update (LSTM
-    details #3 and #5); otherwise the update would see a different state from the one the action
-    was sampled with.
+    The core is stepped one time step at a time so the hidden state can be zeroed wherever an
+    episode starts, both when acting and when re-running sequences in the update (LSTM details
+    #3 and #5); otherwise the update would see a different state from the one the action was
+    sampled with. For RL² "episode" means trial: the env wrapper reports only trial starts.
     """
 
     def __init__(self, in_dim: int, spec: PolicySpec) -> None:
         super().__init__()
         self.in_dim = in_dim
-        self.lstm = nn.LSTM(in_dim, spec.lstm_hidden_size)
-        for name, param in self.lstm.named_parameters():  # LSTM detail #1: orthogonal weights, zero biases
+        core = nn.LSTM if spec.type == "lstm" else nn.GRU
+        self.core = core(in_dim, spec.recurrent_size)
+        for name, param in self.core.named_parameters():  # LSTM detail #1: orthogonal weights, zero biases
             if "bias" in name:
                 nn.init.constant_(param, 0.0)
             else:
                 nn.init.orthogonal_(param, 1.0)
-        self.net = mlp(spec.lstm_hidden_size, spec.hidden_sizes, spec.activation)
+        self.net = mlp(spec.recurrent_size, spec.hidden_sizes, spec.activation)
         self.out_dim = spec.hidden_sizes[-1]
+        self._parts = 2 if spec.type == "lstm" else 1  # LSTM: (h, c); GRU: (h,)
 
-    def initial_state(self, num_envs: int) -> LSTMHidden:
-        size = (1, num_envs, self.lstm.hidden_size)  # LSTM detail #2: the state starts at zero
-        return torch.zeros(size), torch.zeros(size)
+    def initial_state(self, num_envs: int) -> Hidden:
+        size = (1, num_envs, self.core.hidden_size)  # LSTM detail #2: the state starts at zero
+        return tuple(torch.zeros(size) for _ in range(self._parts))
 
-    def forward(
-        self, x: torch.Tensor, state: LSTMHidden, episode_starts: torch.Tensor
-    ) -> tuple[torch.Tensor, LSTMHidden]:
-        h, c = state
+    def forward(self, x: torch.Tensor, state: Hidden, episode_starts: torch.Tensor) -> tuple[torch.Tensor, Hidden]:
         outputs = []
         for x_t, start_t in zip(x, episode_starts):
             keep = (~start_t).float().view(1, -1, 1)  # LSTM detail #3: zero the state where an episode starts
-            out, (h, c) = self.lstm(x_t.unsqueeze(0), (h * keep, c * keep))
+            state = tuple(part * keep for part in state)
+            out, state = self.core(x_t.unsqueeze(0), state if self._parts == 2 else state[0])
+            state = state if self._parts == 2 else (state,)
             outputs.append(out)
-        return self.net(torch.cat(outputs)), (h, c)
+        return self.net(torch.cat(outputs)), state
 
 
-def make_torso(spec: PolicySpec, in_dim: int) -> MLPTorso | LSTMTorso:
-    return LSTMTorso(in_dim, spec) if spec.type == "lstm" else MLPTorso(in_dim, spec)
+def make_torso(spec: PolicySpec, in_dim: int) -> MLPTorso | RecurrentTorso:
+    return MLPTorso(in_dim, spec) if spec.type == "mlp" else RecurrentTorso(in_dim, spec)
 
 
 class ActorCritic(nn.Module):
@@ -137,7 +144,7 @@ class ActorCritic(nn.Module):
 
     @property
     def recurrent(self) -> bool:
-        return isinstance(self.actor, LSTMTorso)
+        return isinstance(self.actor, RecurrentTorso)
 
     def initial_state(self, num_envs: int) -> RecurrentState | None:
         if not self.recurrent:
@@ -146,14 +153,14 @@ class ActorCritic(nn.Module):
 
     def distribution(
         self, obs: torch.Tensor, state: RecurrentState | None, episode_starts: torch.Tensor
-    ) -> tuple[Normal, LSTMHidden | None]:
+    ) -> tuple[Normal, Hidden | None]:
         features, actor_state = self.actor(obs, None if state is None else state.actor, episode_starts)
         mean = self.actor_mean(features)
         return Normal(mean, self.actor_logstd.exp().expand_as(mean), validate_args=False), actor_state
 
     def value(
         self, critic_obs: torch.Tensor, state: RecurrentState | None, episode_starts: torch.Tensor
-    ) -> tuple[torch.Tensor, LSTMHidden | None]:
+    ) -> tuple[torch.Tensor, Hidden | None]:
         features, critic_state = self.critic(critic_obs, None if state is None else state.critic, episode_starts)
         return self.critic_value(features).squeeze(-1), critic_state
 

@@ -161,7 +161,9 @@ class PPOAgent:
         has_privileged = self.privileged_dim > 0
         self.privileged_normalizer = ObservationNormalizer(self.privileged_dim, ppo.norm_obs and has_privileged)
         self.reward_scaler = RewardScaler(ppo.num_envs, ppo.gamma, ppo.norm_reward)
-        self.buffer = RolloutBuffer(ppo.rollout_steps, ppo.num_envs, obs_dim, critic_dim, action_space.shape[0])
+        self.buffer = RolloutBuffer(
+            ppo.rollout_steps, ppo.num_envs, obs_dim, critic_dim, action_space.shape[0], ppo.bptt_length
+        )
 
         self.global_step = 0
         self.num_updates = 0
@@ -211,9 +213,9 @@ class PPOAgent:
         if self._obs is None:
             self._reset(envs)
         obs, critic_obs, episode_starts, state = self._obs, self._critic_obs, self._episode_starts, self._state
-        self.buffer.initial_state = state  # the update re-runs sequences from here (LSTM detail #5)
 
         for t in range(ppo.rollout_steps):
+            self.buffer.record_state(t, state)  # the update re-runs each BPTT chunk from here (LSTM detail #5)
             with torch.no_grad():
                 raw_action, logprob, value, state = self.policy.step(
                     obs[None], critic_obs[None], state, episode_starts[None], self.generator

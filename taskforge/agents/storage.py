@@ -16,8 +16,8 @@ MINIBATCH_FIELDS = ("obs", "critic_obs", "actions", "logprobs", "values", "advan
 
 @dataclass(frozen=True)
 class Minibatch:
-    """Tensors shaped `[T, n, ...]`: `n` whole sequences of length `T` (recurrent policy), or
-    `T = 1` and `n` shuffled single steps (feed-forward policy)."""
+    """Tensors shaped `[T, n, ...]`: `n` sequences of length `T = bptt_length` (recurrent
+    policy), or `T = 1` and `n` shuffled single steps (feed-forward policy)."""
 
     obs: torch.Tensor
     critic_obs: torch.Tensor
@@ -35,12 +35,16 @@ class RolloutBuffer:
     """Holds `num_steps` vector steps of `num_envs` envs.
 
     Observations are stored already normalised (as the policy saw them), actions raw (before
-    clipping or squashing, continuous detail #5), rewards already scaled. `initial_state` is the
-    recurrent state before the first stored step, from which the update re-runs every sequence.
+    clipping or squashing, continuous detail #5), rewards already scaled. A recurrent rollout is
+    cut into chunks of `chunk_length` steps; `chunk_states[c]` is the recurrent state before the
+    first step of chunk c, from which the update re-runs that chunk (truncated BPTT).
     """
 
-    def __init__(self, num_steps: int, num_envs: int, obs_dim: int, critic_dim: int, action_dim: int) -> None:
+    def __init__(
+        self, num_steps: int, num_envs: int, obs_dim: int, critic_dim: int, action_dim: int, chunk_length: int | None = None
+    ) -> None:
         self.num_steps = num_steps
+        self.chunk_length = chunk_length or num_steps
         self.num_envs = num_envs
         shape = (num_steps, num_envs)
         self.obs = torch.zeros((*shape, obs_dim))
@@ -55,7 +59,13 @@ class RolloutBuffer:
         self.final_values = torch.zeros(shape)
         self.advantages = torch.zeros(shape)
         self.returns = torch.zeros(shape)
-        self.initial_state: RecurrentState | None = None
+        self.chunk_states: list[RecurrentState] = []
+
+    def record_state(self, t: int, state: RecurrentState | None) -> None:
+        """Keep the recurrent state before step `t` if a chunk starts there (LSTM detail #5)."""
+        if state is not None and t % self.chunk_length == 0:
+            del self.chunk_states[t // self.chunk_length :]
+            self.chunk_states.append(state)
 
     def store(
         self,
@@ -93,22 +103,25 @@ class RolloutBuffer:
             self.rewards, self.values, next_values, self.terminated, self.truncated, gamma, lam
         )
 
-    def minibatches(
-        self, num_minibatches: int, generator: torch.Generator, whole_sequences: bool
-    ) -> Iterator[Minibatch]:
+    def minibatches(self, num_minibatches: int, generator: torch.Generator, recurrent: bool) -> Iterator[Minibatch]:
         """One epoch of shuffled minibatches (core detail #6).
 
-        `whole_sequences=True` (recurrent policy, LSTM detail #4): shuffle envs and give each
-        minibatch the complete `[T]` sequences of its envs, with their initial state, so the
-        LSTM can be re-run exactly. Otherwise shuffle single steps of the flattened batch.
+        Recurrent policy (LSTM detail #4): the `[T, N]` rollout becomes `N * T / chunk_length`
+        sequences of `chunk_length` steps (chunk-major), shuffled whole, each with the state it
+        started from, so the core is re-run exactly as it acted. Otherwise shuffle single steps.
         """
-        if whole_sequences:
-            source = {name: getattr(self, name) for name in MINIBATCH_FIELDS}
-            count = self.num_envs
+        if recurrent:
+            chunks, length = self.num_steps // self.chunk_length, self.chunk_length
+            source = {  # [T, N, ...] -> [chunks, length, N, ...] -> [length, chunks * N, ...]
+                name: getattr(self, name).unflatten(0, (chunks, length)).transpose(0, 1).flatten(1, 2)
+                for name in MINIBATCH_FIELDS
+            }
+            states = RecurrentState.concat(self.chunk_states)
+            count = chunks * self.num_envs
         else:
             source = {name: getattr(self, name).flatten(0, 1).unsqueeze(0) for name in MINIBATCH_FIELDS}
             count = self.num_steps * self.num_envs
         permutation = torch.randperm(count, generator=generator)
         for idx in torch.tensor_split(permutation, num_minibatches):
-            state = self.initial_state.select(idx) if whole_sequences else None
+            state = states.select(idx) if recurrent else None
             yield Minibatch(**{name: tensor[:, idx] for name, tensor in source.items()}, state=state)

@@ -29,6 +29,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     `reset(options={"stage": ..., "task": ..., "goal_index": ..., "replay": ...})` switches the
     stage, the sub-task of a task set, or pins the goal for that episode (`replay` is only echoed
     back in `info`); this is how a curriculum drives vectorised workers without rebuilding them.
+    `reset(options={"same_task": True})` starts another episode of the previous one's stage,
+    sub-task and goal with the same physics draw (noise processes restart): RL²'s trials.
 
     A vectorised trainer cannot pass options through autoreset, so it sets `next_episode`
     (e.g. with `VectorEnv.set_attr`) to the options the *next* reset without options should use.
@@ -110,6 +112,11 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             seed, self._seed = self._seed, None  # the constructor's seed seeds the first reset
         super().reset(seed=seed)
         options = options or self.next_episode or {}
+        same_task = bool(options.get("same_task"))
+        if same_task:
+            if not self._episode:
+                raise RuntimeError("reset(options={'same_task': True}) needs an earlier reset to repeat")
+            options = self._episode
         if "stage" in options:
             self.stage = self._check_stage(options["stage"])
         rng = self.np_random
@@ -121,7 +128,10 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             goal_index = int(rng.integers(self.backend.num_goals(self.split)))
 
         randomizer = self._randomizers.get(name)
-        physics_draw = randomizer.apply(rng) if randomizer else np.zeros(0)
+        if same_task:  # the model still holds the previous draw: the task includes its physics
+            physics_draw = self._physics_draw
+        else:
+            physics_draw = randomizer.apply(rng) if randomizer else np.zeros(0)
         self._obs_noise.reset(rng)
         self._act_noise.reset(rng)
         self._latency.reset(rng)

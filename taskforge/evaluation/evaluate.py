@@ -1,8 +1,10 @@
-"""Deterministic evaluation of a policy on a stage of a task, goal by goal.
+"""Deterministic evaluation of a policy on a stage of a task, goal by goal, in trials.
 
-Episodes run on a handful of envs in this process, batched through the policy; episode k uses
-goal `k mod number-of-goals` of the split, so 50 episodes on ML1's test split visit every
-held-out goal once.
+A trial is K episodes on one goal from a fresh recurrent state (`RL2Trial`): K is the RL² agent's
+`trial_episodes`, or 1 for a memoryless PPO policy unless asked otherwise (K > 1 for PPO is the
+meta-test baseline: its adaptation curve is flat). Trials run on a handful of envs in this
+process, batched through the policy; trial k uses goal `k mod number-of-goals` of the split, so
+50 trials on ML1's test split visit every held-out goal once.
 """
 
 from __future__ import annotations
@@ -12,42 +14,64 @@ from pathlib import Path
 
 import numpy as np
 
-from taskforge.agents import PPOAgent
+from taskforge.agents import PPOAgent, RL2Trial
 from taskforge.backends import Split
 from taskforge.envs import TaskEnv
 from taskforge.evaluation.stats import wilson_interval
 from taskforge.spec import TaskSpec
 
 
+def _rate(successes: np.ndarray) -> dict:
+    """Success rate of a flat array of episode outcomes, with its 95 % Wilson interval."""
+    low, high = wilson_interval(int(successes.sum()), successes.size)
+    return {"success_rate": float(successes.mean()) if successes.size else 0.0, "success_ci95": [low, high]}
+
+
 @dataclass
 class StageResult:
+    """Outcomes of `trials` trials of `trial_episodes` episodes: arrays `[trial, episode]`."""
+
     task: str
     stage: str
     split: str
-    successes: list[bool] = field(default_factory=list)
-    returns: list[float] = field(default_factory=list)
-    lengths: list[int] = field(default_factory=list)
+    trial_episodes: int
+    successes: list[list[bool]] = field(default_factory=list)
+    returns: list[list[float]] = field(default_factory=list)
+    lengths: list[list[int]] = field(default_factory=list)
 
     @property
-    def episodes(self) -> int:
+    def trials(self) -> int:
         return len(self.successes)
 
     @property
     def success_rate(self) -> float:
+        """Over every episode of every trial."""
         return float(np.mean(self.successes)) if self.successes else 0.0
 
+    @property
+    def mean_return(self) -> float:
+        return float(np.mean(self.returns)) if self.returns else 0.0
+
     def as_dict(self) -> dict:
-        low, high = wilson_interval(sum(self.successes), self.episodes)
+        successes = np.asarray(self.successes, dtype=bool).reshape(-1, self.trial_episodes)
+        returns = np.asarray(self.returns, dtype=float).reshape(-1, self.trial_episodes)
+        lengths = np.asarray(self.lengths, dtype=float).reshape(-1, self.trial_episodes)
+        per_episode = [  # the adaptation curve: episode k of every trial
+            {"episode": k + 1, **_rate(successes[:, k]), "mean_return": float(returns[:, k].mean()) if self.trials else 0.0}
+            for k in range(self.trial_episodes)
+        ]
         return {
             "task": self.task,
             "stage": self.stage,
             "split": self.split,
-            "episodes": self.episodes,
-            "successes": int(sum(self.successes)),
-            "success_rate": self.success_rate,
-            "success_ci95": [low, high],
-            "mean_return": float(np.mean(self.returns)) if self.returns else 0.0,
-            "mean_length": float(np.mean(self.lengths)) if self.lengths else 0.0,
+            "trials": self.trials,
+            "trial_episodes": self.trial_episodes,
+            "episodes": int(successes.size),
+            "successes": int(successes.sum()),
+            **_rate(successes.ravel()),
+            "mean_return": self.mean_return,
+            "mean_length": float(lengths.mean()) if lengths.size else 0.0,
+            "per_episode": per_episode,
         }
 
 
@@ -57,51 +81,51 @@ def evaluate(
     task_file: str | Path,
     stage: str,
     split: Split,
-    episodes: int,
+    trials: int,
+    trial_episodes: int | None = None,
     sub_task: str | None = None,
     seed: int = 0,
     parallel: int = 4,
 ) -> StageResult:
-    """Run `episodes` deterministic episodes of `stage` (one sub-task of a set, or all)."""
+    """Run `trials` deterministic trials of `stage` (one sub-task of a set, or all), each of
+    `trial_episodes` episodes (default: the agent's K, 1 for PPO) on one goal."""
+    k = trial_episodes or agent.spec.trial_episodes
+    rl2 = agent.spec.algo == "rl2"
     privileged = agent.privileged_dim > 0
-    envs = [TaskEnv(task, task_file, stage=stage, split=split, task_name=sub_task, privileged=privileged)
-            for _ in range(min(parallel, episodes))]
-    num_goals = envs[0].backend.num_goals(split)
-    result = StageResult(sub_task or task.name, stage, split)
-    queue = list(range(episodes))
-    active: list[int | None] = [None] * len(envs)  # episode index each env is playing
+    envs = [
+        RL2Trial(TaskEnv(task, task_file, stage=stage, split=split, task_name=sub_task, privileged=privileged), k, augment=rl2)
+        for _ in range(min(parallel, trials))
+    ]
+    num_goals = envs[0].unwrapped.backend.num_goals(split)
+    result = StageResult(sub_task or task.name, stage, split, k)
+    queue = list(range(trials))
+    active = [True] * len(envs)
     obs = np.zeros((len(envs), envs[0].observation_space.shape[0]), dtype=np.float32)
-    ret = np.zeros(len(envs))
-    length = np.zeros(len(envs), dtype=int)
-    ever = np.zeros(len(envs), dtype=bool)
     starts = np.ones(len(envs), dtype=bool)
 
     def start(i: int) -> None:
-        k = queue.pop(0)
-        obs[i], _ = envs[i].reset(seed=seed + k, options={"stage": stage, "goal_index": k % num_goals})
-        active[i], ret[i], length[i], ever[i], starts[i] = k, 0.0, 0, False, True
+        n = queue.pop(0)
+        obs[i], _ = envs[i].reset(seed=seed + n, options={"stage": stage, "goal_index": n % num_goals})
+        starts[i] = True  # a fresh recurrent state for every trial
 
     for i in range(len(envs)):
         start(i)
     state = agent.initial_state(len(envs))
-    while any(a is not None for a in active):
+    while any(active):
         actions, state = agent.act(obs, state, starts, deterministic=True)
         starts[:] = False
         for i, env in enumerate(envs):
-            if active[i] is None:
+            if not active[i]:
                 continue
-            obs[i], reward, terminated, truncated, info = env.step(actions[i])
-            ret[i] += reward
-            length[i] += 1
-            ever[i] |= info["success"]
-            if terminated or truncated:
-                result.successes.append(bool(ever[i]))
-                result.returns.append(float(ret[i]))
-                result.lengths.append(int(length[i]))
+            obs[i], _, trial_over, _, info = env.step(actions[i])
+            if trial_over:
+                result.successes.append(info["trial_successes"].tolist())
+                result.returns.append(info["trial_returns"].tolist())
+                result.lengths.append(info["trial_lengths"].tolist())
                 if queue:
                     start(i)
                 else:
-                    active[i] = None
+                    active[i] = False
     for env in envs:
         env.close()
     return result

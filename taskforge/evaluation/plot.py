@@ -1,9 +1,12 @@
 """`taskforge plot`: learning curves (return, success) from a run's metrics.jsonl, with the
-curriculum's promotions marked as vertical lines."""
+curriculum's promotions marked as vertical lines; or adaptation curves (success per episode of
+the trial, with 95 % Wilson bands) from `taskforge eval` reports."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -42,6 +45,46 @@ def plot_run(run_dir: str | Path, out: str | Path | None = None) -> Path:
                         rotation=90, va="top", ha="right", fontsize=7, color="grey")
     ax_succ.legend(loc="upper left", fontsize=8)
     ax_ret.set_title(run_dir.name)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=120)
+    plt.close(fig)
+    return out
+
+
+def _read_report(path: Path) -> dict[str, Any]:
+    try:
+        report = json.loads(path.read_text())
+        report["rows"][0]["per_episode"]
+    except FileNotFoundError:
+        raise SpecError.single(path, "", "no such eval report") from None
+    except (json.JSONDecodeError, KeyError, IndexError, TypeError):
+        raise SpecError.single(path, "", "not a `taskforge eval --out` report with per-episode results") from None
+    return report
+
+
+def plot_adaptation(reports: list[Path], out: str | Path | None = None) -> Path:
+    """Success rate vs episode index within the trial, one line per (report, task, stage): the
+    meta-test adaptation curve. An RL² agent that adapts rises from episode 1 to K; a memoryless
+    policy evaluated over the same trials stays flat."""
+    loaded = [(path, _read_report(path)) for path in reports]
+    out = Path(out) if out else reports[0].parent / "adaptation.png"
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for path, report in loaded:
+        for row in report["rows"]:
+            episodes = [e["episode"] for e in row["per_episode"]]
+            rates = [e["success_rate"] for e in row["per_episode"]]
+            low = [e["success_ci95"][0] for e in row["per_episode"]]
+            high = [e["success_ci95"][1] for e in row["per_episode"]]
+            label = f"{report.get('algo', '?')} · {row['task']}:{row['stage']} ({path.stem})"
+            (line,) = ax.plot(episodes, rates, "o-", label=label)
+            ax.fill_between(episodes, low, high, color=line.get_color(), alpha=0.15)
+    ax.set_xlabel("episode within the trial")
+    ax.set_ylabel(f"success rate ({loaded[0][1]['split']} goals)")
+    ax.set_ylim(-0.02, 1.02)
+    ax.xaxis.get_major_locator().set_params(integer=True)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("meta-test adaptation (95 % Wilson bands)")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)

@@ -14,11 +14,12 @@ from taskforge.spec.common import StrictModel
 
 
 class PolicySpec(StrictModel):
-    type: Literal["mlp", "lstm"] = "mlp"
+    type: Literal["mlp", "lstm", "gru"] = "mlp"
+    """`mlp`: feed-forward; `lstm` / `gru`: a recurrent core before the MLP (RL² uses `gru`)."""
     hidden_sizes: list[int] = Field(default_factory=lambda: [256, 256], min_length=1)
     activation: Literal["tanh", "relu", "elu"] = "tanh"
-    lstm_hidden_size: int = Field(default=128, ge=1)
-    """Width of the LSTM core (only for `type: lstm`)."""
+    recurrent_size: int = Field(default=128, ge=1)
+    """Width of the LSTM or GRU core (recurrent policies only)."""
     action_bounds: Literal["clip", "squash"] = "clip"
     """How Gaussian samples meet the action box: `clip` at the env boundary (CleanRL) or `squash`
     with tanh (log-prob corrected)."""
@@ -50,6 +51,15 @@ class PPOSpec(StrictModel):
     norm_adv: bool = True
     norm_obs: bool = True
     norm_reward: bool = True
+    bptt_length: int | None = Field(default=None, ge=1)
+    """Recurrent policies: the update re-runs the rollout in chunks of this many steps, each from
+    the hidden state recorded when it was collected (truncated backprop through time); default
+    the whole rollout. Must divide `rollout_steps`."""
+
+    @property
+    def num_sequences(self) -> int:
+        """Sequences a recurrent update shuffles: `num_envs` times the chunks per rollout."""
+        return self.num_envs * (self.rollout_steps // (self.bptt_length or self.rollout_steps))
 
     @model_validator(mode="after")
     def _minibatches_fit(self) -> "PPOSpec":
@@ -59,7 +69,19 @@ class PPOSpec(StrictModel):
                 f"'num_minibatches' ({self.num_minibatches}) exceeds the batch "
                 f"num_envs*rollout_steps = {batch}"
             )
+        if self.bptt_length is not None and self.rollout_steps % self.bptt_length:
+            raise ValueError(
+                f"'bptt_length' ({self.bptt_length}) must divide 'rollout_steps' ({self.rollout_steps})"
+            )
         return self
+
+
+class RL2Spec(StrictModel):
+    """RL² (Duan et al., 2016): a trial is `trial_episodes` episodes on one task and goal; the
+    recurrent state persists across its episodes and resets between trials."""
+
+    trial_episodes: int = Field(default=10, ge=1, le=1000)
+    """K, the episodes per trial. Meta-test runs one trial of K episodes per held-out goal."""
 
 
 class RuntimeSpec(StrictModel):
@@ -76,18 +98,35 @@ class RuntimeSpec(StrictModel):
 
 class AgentSpec(StrictModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-.]+$")
-    algo: Literal["ppo"] = "ppo"
+    algo: Literal["ppo", "rl2"] = "ppo"
+    """`ppo`: one episode at a time; `rl2`: PPO over trials of `rl2.trial_episodes` episodes, with
+    the previous action, reward and an episode-start flag added to the observation."""
     policy: PolicySpec = PolicySpec()
     asymmetric_critic: bool = False
     """The critic also sees privileged features (object velocity, goal, drawn physics)."""
     ppo: PPOSpec = PPOSpec()
+    rl2: RL2Spec | None = None
+    """Trial settings; required with `algo: rl2`, not allowed otherwise."""
     runtime: RuntimeSpec = RuntimeSpec()
 
+    @property
+    def trial_episodes(self) -> int:
+        """Episodes per trial: K for RL², 1 for a memoryless PPO agent."""
+        return self.rl2.trial_episodes if self.rl2 is not None else 1
+
     @model_validator(mode="after")
-    def _recurrent_minibatches(self) -> "AgentSpec":
-        if self.policy.type == "lstm" and self.ppo.num_minibatches > self.ppo.num_envs:
+    def _consistent(self) -> "AgentSpec":
+        ppo = self.ppo
+        if self.policy.type != "mlp" and ppo.num_minibatches > ppo.num_sequences:
             raise ValueError(
-                f"an LSTM policy trains on whole env sequences, so ppo.num_minibatches "
-                f"({self.ppo.num_minibatches}) must be <= ppo.num_envs ({self.ppo.num_envs})"
+                f"a recurrent policy trains on whole sequences (num_envs * rollout_steps / bptt_length = "
+                f"{ppo.num_sequences}), so ppo.num_minibatches ({ppo.num_minibatches}) must be <= {ppo.num_sequences}"
             )
+        if self.algo == "rl2":
+            if self.rl2 is None:
+                raise ValueError("algo 'rl2' needs an 'rl2' section (e.g. rl2: {trial_episodes: 10})")
+            if self.policy.type == "mlp":
+                raise ValueError("algo 'rl2' needs a recurrent policy (policy.type 'gru' or 'lstm'), not 'mlp'")
+        elif self.rl2 is not None:
+            raise ValueError("an 'rl2' section needs algo: rl2")
         return self

@@ -25,6 +25,9 @@ class EpisodeStats:
     returns: list[float] = field(default_factory=list)
     lengths: list[int] = field(default_factory=list)
     successes: list[bool] = field(default_factory=list)
+    """Success of each finished episode; for an RL² trial, of its last episode."""
+    first_successes: list[bool] = field(default_factory=list)
+    """RL² only: success of each finished trial's first episode (before it could adapt)."""
     stages: list[str] = field(default_factory=list)
 
 
@@ -71,6 +74,8 @@ class CurriculumDriver:
             self.stats.returns.append(float(self._return[i]))
             self.stats.lengths.append(int(self._length[i]))
             self.stats.successes.append(success)
+            if "trial_successes" in final:
+                self.stats.first_successes.append(bool(final["trial_successes"][i][0]))
             self.stats.stages.append(assignment.stage)
             self._return[i] = 0.0
             self._length[i] = 0

@@ -16,15 +16,16 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+import gymnasium
 import numpy as np
 from gymnasium.vector import VectorEnv
 from tqdm import tqdm
 
-from taskforge.agents import PPOAgent, make_vector_env, set_torch_threads
+from taskforge.agents import PPOAgent, agent_observation_space, make_vector_env, set_torch_threads, wrap_for_training
 from taskforge.curriculum import CurriculumScheduler
 from taskforge.envs import ResolvedCurriculum, TaskEnv, load_curriculum, probe_phases
 from taskforge.evaluation import evaluate
-from taskforge.spec import SpecError
+from taskforge.spec import AgentSpec, SpecError, TaskSpec
 from taskforge.training.checkpoint import load_checkpoint, save_checkpoint, save_json
 from taskforge.training.driver import CurriculumDriver
 from taskforge.training.metrics import MetricsLogger
@@ -57,10 +58,15 @@ def run_config(cur: ResolvedCurriculum, seed: int, total_steps: int) -> dict[str
     }
 
 
+def _train_env(task: TaskSpec, task_file: str, privileged: bool, agent: AgentSpec) -> gymnasium.Env:
+    """One worker's env: a `TaskEnv` on the train goals, in trials for RL²."""
+    return wrap_for_training(TaskEnv(task, task_file, split="train", privileged=privileged), agent)
+
+
 def _build_envs(cur: ResolvedCurriculum, phase: int, privileged: bool) -> VectorEnv:
     spec = cur.agent
     p = cur.phases[phase]
-    fns = [partial(TaskEnv, p.task, str(p.task_file), split="train", privileged=privileged) for _ in range(spec.ppo.num_envs)]
+    fns = [partial(_train_env, p.task, str(p.task_file), privileged, spec) for _ in range(spec.ppo.num_envs)]
     return make_vector_env(fns, spec.runtime)
 
 
@@ -103,7 +109,8 @@ def train(
     shapes = probe_phases([(p.task, p.task_file) for p in cur.phases], privileged, cur.file)
     if privileged and shapes.privileged_size == 0:
         raise SpecError.single(cur.agent_file, "asymmetric_critic", "the curriculum's backends expose no privileged features; set it to false")
-    agent = PPOAgent(agent_spec, shapes.observation_space, shapes.action_space, shapes.privileged_size, seed)
+    obs_space = agent_observation_space(agent_spec, shapes.observation_space, shapes.action_space)
+    agent = PPOAgent(agent_spec, obs_space, shapes.action_space, shapes.privileged_size, seed)
     scheduler = CurriculumScheduler(cur.spec, [p.stages for p in cur.phases], shapes.task_names, seed)
     if state:
         agent.load_state_dict(state["agent"])
@@ -155,6 +162,8 @@ def train(
                 "return_mean": float(np.mean(episodes.returns)) if episodes.returns else None,
                 "length_mean": float(np.mean(episodes.lengths)) if episodes.lengths else None,
                 "success_rate": float(np.mean(episodes.successes)) if episodes.successes else None,
+                # RL²: success_rate is the trials' last episode (after adapting); this their first
+                "success_first_episode": float(np.mean(episodes.first_successes)) if episodes.first_successes else None,
                 **{f"success/{stage}": float(np.mean(v)) for stage, v in per_stage.items()},
                 **{f"window_success/{k}": v for k, v in scheduler.success_rates().items()},
                 **losses,
@@ -162,7 +171,7 @@ def train(
             if agent.global_step >= next_eval:
                 next_eval += every_eval
                 result = _evaluate_current(agent, cur, scheduler, seed)
-                record.update({"eval_success_rate": result.success_rate, "eval_return_mean": float(np.mean(result.returns))})
+                record.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
                 bar.write(f"[{agent.global_step:,}] eval {result.stage} on {result.split}: success {result.success_rate:.2f}")
             logger.log(agent.global_step, record)
             bar.update(agent.global_step - start_step)
