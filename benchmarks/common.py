@@ -60,3 +60,17 @@ def print_table(headers: list[str], rows: list[list[Any]]) -> None:
         print("  ".join(c.rjust(w) for c, w in zip(row, widths)))
         if k == 0:
             print("  ".join("-" * w for w in widths))
+
+
+def advance_run(curriculum: Path, run_dir: Path, seed: int, total: int, chunk: int) -> int:
+    """Train one benchmark run up to `chunk` more env steps (never past `total`), resuming from
+    its checkpoint; returns its step count. Long comparisons span sessions this way."""
+    from taskforge.training import train
+    from taskforge.training.checkpoint import load_checkpoint
+
+    ckpt = run_dir / "checkpoint.pt"
+    done = load_checkpoint(ckpt)["agent"]["global_step"] if ckpt.exists() else 0
+    if done < total:
+        train(curriculum, run_dir=run_dir, seed=seed, steps=min(total, done + chunk), resume=ckpt.exists(), progress=False)
+        done = load_checkpoint(ckpt)["agent"]["global_step"]
+    return done

@@ -21,26 +21,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import print_table, write_result  # noqa: E402
-from taskforge.training import train  # noqa: E402
+from benchmarks.common import advance_run, print_table, write_result  # noqa: E402
 from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
 from taskforge.training.metrics import read_jsonl  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {"curriculum": ROOT / "curricula/pick_place.yaml", "flat": ROOT / "benchmarks/configs/pick_place_flat.yaml"}
 RUNS = ROOT / "benchmarks/runs/pick_place"
-
-
-def advance(variant: str, seed: int, total: int, chunk: int) -> int:
-    """Train one run up to `chunk` more steps (never past `total`); returns its step count."""
-    run_dir = RUNS / f"{variant}-seed{seed}"
-    ckpt = run_dir / "checkpoint.pt"
-    done = load_checkpoint(ckpt)["agent"]["global_step"] if ckpt.exists() else 0
-    if done < total:
-        target = min(total, done + chunk)
-        train(VARIANTS[variant], run_dir=run_dir, seed=seed, steps=target, resume=ckpt.exists(), progress=False)
-        done = load_checkpoint(ckpt)["agent"]["global_step"]
-    return done
 
 
 def main() -> None:
@@ -61,7 +48,7 @@ def main() -> None:
                 step = load_checkpoint(run_dir / "checkpoint.pt")["agent"]["global_step"]
             else:
                 start = time.perf_counter()
-                step = advance(variant, seed, args.steps, args.chunk_steps)
+                step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
                 print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
             metrics = read_jsonl(run_dir / "metrics.jsonl")
             runs[f"{variant}-seed{seed}"] = {

@@ -1,0 +1,120 @@
+"""RL² on Meta-World ML1 (goal hidden): meta-train and meta-test success vs env steps over
+several seeds, and the adaptation curve (success at episode 1..K of a trial on held-out goals)
+of RL² next to a memoryless PPO baseline.
+
+    python benchmarks/rl2_ml1.py [--variants rl2-reach ppo-reach rl2-push rl2-pick-place]
+                                 [--seeds 0 1 2] [--steps 1000000] [--chunk-steps 100000] [--trials 10]
+
+The full budget takes many hours on 2 cores, so the script works in chunks (like
+pick_place_curriculum.py): each call advances every run by at most `--chunk-steps`, resuming
+from its checkpoint, then evaluates the checkpoint on `--trials` trials of the ML1 train goals
+(meta-train) and of the 50 held-out goals (meta-test), each trial K = 5 episodes from a fresh
+hidden state (the PPO baseline plays the same trials; it cannot adapt, so its curve is flat).
+Evaluations are kept in each run's `meta_evals.jsonl`; the table and JSON are rebuilt from
+them, so run it again to continue.
+
+Reference: the Meta-World paper (Yu et al., CoRL 2019; arXiv 1910.10897) reports ML1 only as
+learning curves, not a table: arXiv v2 Figure 4 ("Comparison on our simplest meta-RL
+evaluation, ML1") and appendix Figures 12-14 (RL², MAML, PEARL on ML1 reach, push, pick-place),
+CoRL version Figure 7. Their RL² ran Meta-World v1 with 500-step paths, 10 roll-outs per task,
+a 256-unit GRU and PPO (appendix Table 10), for far more env steps than fit here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import advance_run, print_table, write_result  # noqa: E402
+from taskforge.evaluation.report import evaluate_run  # noqa: E402
+from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
+from taskforge.training.metrics import read_jsonl  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+VARIANTS = {
+    "rl2-reach": ROOT / "curricula/ml1_reach_rl2.yaml",
+    "ppo-reach": ROOT / "benchmarks/configs/ml1_reach_ppo.yaml",
+    "rl2-push": ROOT / "benchmarks/configs/ml1_push_rl2.yaml",
+    "rl2-pick-place": ROOT / "benchmarks/configs/ml1_pick_place_rl2.yaml",
+}
+RUNS = ROOT / "benchmarks/runs/rl2"
+TRIAL_EPISODES = 5  # agents/rl2.yaml's K; the PPO baseline is evaluated over the same trials
+
+
+def meta_evaluate(run_dir: Path, step: int, trials: int) -> list[dict]:
+    """Meta-train and meta-test evaluation of the run's checkpoint at `step`, cached per step."""
+    cache = run_dir / "meta_evals.jsonl"
+    done = [e for e in read_jsonl(cache) if e["step"] == step and e["trials"] == trials]
+    for split in ("train", "test"):
+        if any(e["split"] == split for e in done):
+            continue
+        report = evaluate_run(run_dir / "checkpoint.pt", split=split, trials=trials, trial_episodes=TRIAL_EPISODES)
+        row = report["rows"][0]
+        entry = {"step": step, "split": split, "trials": trials, "success_rate": row["success_rate"],
+                 "per_episode": [e["success_rate"] for e in row["per_episode"]],
+                 "per_episode_return": [e["mean_return"] for e in row["per_episode"]]}
+        with cache.open("a") as f:
+            f.write(json.dumps(entry) + "\n")
+        done.append(entry)
+    return done
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--steps", type=int, default=1_000_000)
+    parser.add_argument("--chunk-steps", type=int, default=100_000)
+    parser.add_argument("--trials", type=int, default=10, help="trials per split per evaluation (goal k for trial k)")
+    parser.add_argument("--report-only", action="store_true", help="summarise the runs so far, train nothing")
+    args = parser.parse_args()
+
+    runs = {}
+    for variant in args.variants:
+        for seed in args.seeds:
+            run_dir = RUNS / f"{variant}-seed{seed}"
+            ckpt = run_dir / "checkpoint.pt"
+            if not args.report_only:
+                start = time.perf_counter()
+                step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
+                meta_evaluate(run_dir, step, args.trials)
+                print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
+            if not ckpt.exists():
+                continue
+            metrics = read_jsonl(run_dir / "metrics.jsonl")
+            runs[f"{variant}-seed{seed}"] = {
+                "variant": variant, "seed": seed, "steps_done": load_checkpoint(ckpt)["agent"]["global_step"],
+                "evals": read_jsonl(run_dir / "meta_evals.jsonl"),
+                "train_last_episode_success": [(m["step"], m["success_rate"]) for m in metrics if m.get("success_rate") is not None],
+                "steps_per_s": float(np.median([m["steps_per_s"] for m in metrics])),
+            }
+
+    rows = []
+    for variant in args.variants:
+        evals = [e for r in runs.values() if r["variant"] == variant for e in r["evals"]]
+        for step in sorted({e["step"] for e in evals}):
+            cell = {}
+            for split in ("train", "test"):
+                at = [e for e in evals if e["step"] == step and e["split"] == split]
+                cell[split] = (np.mean([e["per_episode"][0] for e in at]), np.mean([e["per_episode"][-1] for e in at]), len(at))
+            rows.append([variant, f"{step:,}", cell["train"][2],
+                         f"{cell['train'][0]:.2f} -> {cell['train'][1]:.2f}", f"{cell['test'][0]:.2f} -> {cell['test'][1]:.2f}"])
+    print_table(["variant", "env steps", "seeds", f"meta-train success ep 1 -> {TRIAL_EPISODES}",
+                 f"meta-test success ep 1 -> {TRIAL_EPISODES}"], rows)
+    missing = len(args.variants) * len(args.seeds) - len(runs)
+    remaining = sum(max(0, args.steps - r["steps_done"]) for r in runs.values()) + missing * args.steps
+    print(f"remaining: {remaining:,} env steps ({len(runs)} runs started, {missing} not started)")
+    write_result("rl2_ml1", {"variants": args.variants, "seeds": args.seeds, "steps": args.steps, "trials": args.trials,
+                             "trial_episodes": TRIAL_EPISODES, "runs": runs, "remaining_steps": remaining,
+                             "complete": remaining == 0})
+
+
+if __name__ == "__main__":
+    main()
