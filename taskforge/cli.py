@@ -25,7 +25,7 @@ def _kind_of(path: Path) -> str:
         return "curriculum"
     if "stages" in data or "backend" in data:
         return "task"
-    if {"ppo", "policy", "algo"} & data.keys():
+    if {"ppo", "policy", "algo", "rl2"} & data.keys():
         return "agent"
     for kind, folder in (("task", "tasks"), ("agent", "agents"), ("curriculum", "curricula")):
         if folder in path.parts:

@@ -45,11 +45,11 @@ def test_bc_on_reach_demos_lowers_action_error_and_raises_success():
     demos = generate(PICK_PLACE, "reach", episodes=16, seed=0)
     assert demos.num_episodes == 16
     agent = small_agent()
-    before = evaluate(agent, task, PICK_PLACE, "reach", "test", episodes=6, seed=500)
+    before = evaluate(agent, task, PICK_PLACE, "reach", "test", trials=6, seed=500)
     rewards = scaled_rewards(agent, demos.rewards, demos.episode_starts, demos.terminated)
     targets = returns_to_go(rewards, demos.episode_starts, demos.truncated, agent.spec.ppo.gamma)
     metrics = pretrain(agent, demos.observations, demos.actions, targets, epochs=40, batch_size=128, learning_rate=1e-3)
-    after = evaluate(agent, task, PICK_PLACE, "reach", "test", episodes=6, seed=500)
+    after = evaluate(agent, task, PICK_PLACE, "reach", "test", trials=6, seed=500)
     assert metrics["bc_action_mse"] < 0.2 * metrics["bc_action_mse_before"], metrics
     assert metrics["bc_value_mse"] < 0.2 * metrics["bc_value_mse_before"], metrics
     assert before.success_rate <= 1 / 6 and after.success_rate >= 5 / 6, (before.success_rate, after.success_rate)

@@ -1,0 +1,303 @@
+"""RL²: trials (K episodes on one goal), the augmented observation, the recurrent state across
+episode boundaries, learning to infer a goal from reward, and the meta-test report."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+import pytest
+import torch
+import yaml
+from gymnasium.spaces import Box
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+from taskforge.agents import PPOAgent, RL2Trial, agent_observation_space
+from taskforge.cli import main
+from taskforge.envs import TaskEnv, load_task
+from taskforge.spec import AgentSpec
+from taskforge.training import train
+from tests.conftest import ROOT
+from tests.test_training import TASK
+
+
+class GoalBandit(gymnasium.Env):
+    """Episodes of `length` steps with a constant observation; reward `1 - |a - g|` for a goal
+    g = ±1 drawn at reset, kept by `reset(options={"same_task": True})`. Without memory no
+    policy beats an expected reward of 0; one that remembers the reward can reach 1."""
+
+    def __init__(self, length: int = 1) -> None:
+        self.observation_space = Box(-1.0, 1.0, (1,), np.float32)
+        self.action_space = Box(-1.0, 1.0, (1,), np.float32)
+        self.length = length
+        self.goal = 1.0
+        self.t = 0
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        if not (options or {}).get("same_task"):
+            self.goal = float(self.np_random.choice([-1.0, 1.0]))
+        self.t = 0
+        return np.zeros(1, dtype=np.float32), {"goal": self.goal}
+
+    def step(self, action):
+        self.t += 1
+        reward = 1.0 - abs(float(action[0]) - self.goal)
+        info = {"goal": self.goal, "episode_success": reward > 0.8}
+        return np.full(1, self.t, dtype=np.float32), reward, False, self.t >= self.length, info
+
+
+def rl2_spec(**ppo: Any) -> AgentSpec:
+    return AgentSpec.model_validate({
+        "name": "rl2-test",
+        "algo": "rl2",
+        "rl2": {"trial_episodes": 4},
+        "policy": {"type": "gru", "recurrent_size": 32, "hidden_sizes": [32], "init_log_std": -0.5},
+        "ppo": {"num_envs": 16, "rollout_steps": 32, "bptt_length": 8, "num_minibatches": 4, "update_epochs": 4,
+                "learning_rate": 3e-3, "gamma": 0.9, "norm_reward": False, **ppo},
+        "runtime": {"vector": "sync", "update_threads": 1},
+    })
+
+
+def vector(env_fn, n: int) -> SyncVectorEnv:
+    return SyncVectorEnv([env_fn] * n, autoreset_mode=AutoresetMode.SAME_STEP)
+
+
+# ---------------------------------------------------------------------------------- the wrapper
+
+def test_trial_wrapper_aligns_previous_action_reward_and_episode_start_with_the_right_step():
+    env = RL2Trial(GoalBandit(length=2), trial_episodes=3)
+    obs, info = env.reset(seed=0)
+    goal = info["goal"]
+    np.testing.assert_array_equal(obs, [0.0, 0.0, 0.0, 1.0])  # obs, no action, no reward, episode start
+    rng = np.random.default_rng(0)
+    for t in range(6):
+        action = rng.uniform(-1.5, 1.5, size=1).astype(np.float32)
+        obs, reward, terminated, truncated, info = env.step(action)
+        clipped = float(np.clip(action[0], -1, 1))
+        assert reward == pytest.approx(1.0 - abs(clipped - goal))
+        # this step's clipped action and reward ride on the next observation
+        assert obs[1] == pytest.approx(clipped) and obs[2] == pytest.approx(reward)
+        inner_end = t % 2 == 1
+        assert obs[3] == float(inner_end and t < 5)  # the next episode's first observation is flagged
+        if inner_end and t < 5:
+            assert obs[0] == 0.0  # ... and is the reset observation of the same goal
+        assert info["goal"] == goal and not truncated
+        assert terminated == (t == 5)  # only the K-th episode ends the trial
+    assert info["trial_successes"].shape == (3,) and info["trial_lengths"].tolist() == [2, 2, 2]
+    assert info["trial_returns"].sum() == pytest.approx(sum(env._returns))
+
+
+def test_trial_wrapper_keeps_the_goal_within_a_trial_and_redraws_it_between_trials():
+    env = RL2Trial(GoalBandit(length=1), trial_episodes=3)
+    goals = []
+    env.reset(seed=1)
+    for _ in range(30):
+        _, _, terminated, _, info = env.step(np.zeros(1, dtype=np.float32))
+        goals.append(info["goal"])
+        if terminated:
+            env.reset()
+    trials = np.array(goals).reshape(10, 3)
+    assert (trials == trials[:, :1]).all()  # constant inside every trial
+    assert len(set(trials[:, 0])) == 2  # but both goals occur across trials
+
+
+def test_task_env_same_task_repeats_goal_and_physics_draw():
+    """Meta-World reach with its physics randomisation: `same_task` resets repeat the goal, the
+    drawn masses/damping and the initial state; a normal reset draws new ones."""
+    path = ROOT / "tasks/metaworld/reach.yaml"
+    env = TaskEnv(load_task(path), path, privileged=True)
+    _, first = env.reset(seed=0)
+    goal = env.features()["goal_pos"].copy()
+    model = env.backend.model(first["task"])
+    masses = model.body_mass.copy()
+    env.step(env.action_space.sample())
+    _, again = env.reset(options={"same_task": True})
+    assert again["goal_index"] == first["goal_index"]
+    np.testing.assert_array_equal(env.features()["goal_pos"], goal)
+    np.testing.assert_array_equal(model.body_mass, masses)
+    np.testing.assert_array_equal(again["privileged"], first["privileged"])
+    _, other = env.reset()
+    assert not np.array_equal(model.body_mass, masses) and not np.array_equal(other["privileged"], first["privileged"])
+    env.close()
+
+
+# -------------------------------------------------------------------------- the recurrent state
+
+def test_hidden_state_carries_across_episodes_of_a_trial_and_resets_between_trials():
+    """Re-run the actor over a collected rollout with three reset patterns: only the pattern the
+    agent must use (reset at trial starts, carry across inner episode starts) reproduces the
+    log-probabilities it acted with. Fails if the state is reset at every episode, or never."""
+    spec = rl2_spec(num_envs=2, rollout_steps=24, bptt_length=None, num_minibatches=1)
+    envs = vector(lambda: RL2Trial(GoalBandit(length=2), trial_episodes=3), 2)
+    agent = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    agent.collect(envs)
+    buf = agent.buffer
+    trial_starts = buf.episode_starts
+    expected = torch.zeros_like(trial_starts)
+    expected[::6] = True  # trials of 3 episodes of 2 steps: the agent sees only trial starts
+    assert torch.equal(trial_starts, expected)
+    inner_starts = torch.zeros_like(trial_starts)
+    inner_starts[::2] = True  # every episode start, inside trials too
+
+    def logprobs(starts: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            lp, _, _ = agent.policy.evaluate(buf.obs, buf.critic_obs, buf.actions, buf.chunk_states[0], starts, agent.generator)
+        return lp
+
+    torch.testing.assert_close(logprobs(trial_starts), buf.logprobs, rtol=0, atol=1e-5)
+    assert not torch.allclose(logprobs(inner_starts | trial_starts), buf.logprobs, atol=1e-3)  # reset per episode
+    assert not torch.allclose(logprobs(torch.zeros_like(trial_starts)), buf.logprobs, atol=1e-3)  # never reset
+    envs.close()
+
+
+def test_truncated_bptt_chunks_replay_the_states_the_agent_acted_with():
+    """With bptt_length < rollout_steps, every chunk of the first update epoch starts from the
+    recorded state, so the new/old probability ratio is exactly 1 before any gradient step."""
+    spec = rl2_spec(num_envs=4, rollout_steps=24, bptt_length=6, num_minibatches=2)
+    envs = vector(lambda: RL2Trial(GoalBandit(length=2), trial_episodes=3), 4)
+    agent = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    agent.collect(envs)
+    agent.collect(envs)  # a rollout that starts mid-trial, from a non-zero state
+    assert len(agent.buffer.chunk_states) == 4 and agent.buffer.chunk_states[0].actor[0].abs().sum() > 0
+    for mb in agent.buffer.minibatches(2, torch.Generator().manual_seed(0), recurrent=True):
+        with torch.no_grad():
+            lp, _, _ = agent.policy.evaluate(mb.obs, mb.critic_obs, mb.actions, mb.state, mb.episode_starts, agent.generator)
+        torch.testing.assert_close(lp, mb.logprobs, rtol=0, atol=1e-5)
+    envs.close()
+
+
+# ------------------------------------------------------------------------------------- learning
+
+def mean_reward_by_episode(agent: PPOAgent, env: gymnasium.Env, trials: int, k: int) -> np.ndarray:
+    """Deterministic trials of k one-step episodes; mean reward of each episode index."""
+    rewards = np.zeros((trials, k))
+    for n in range(trials):
+        obs, _ = env.reset(seed=10_000 + n)
+        state, start = agent.initial_state(1), True
+        for i in range(k):
+            action, state = agent.act(obs[None], state, np.array([start]))
+            obs, rewards[n, i], *_ = env.step(action[0])
+            start = False
+            if i < k - 1 and not isinstance(env, RL2Trial):
+                obs, _ = env.reset(options={"same_task": True})
+    return rewards.mean(axis=0)
+
+
+def test_rl2_infers_the_goal_from_reward_and_beats_a_memoryless_policy():
+    """Same budget (12k steps, about 10 s each) for both. A memoryless policy cannot beat 0 on
+    average; RL² learns to read the goal off the first episode's reward. Measured: RL² episodes
+    2-4 average 1.0 (episode 1: -0.1), memoryless PPO about 0.0."""
+    k, steps = 4, 12_000
+    spec = rl2_spec()
+    envs = vector(lambda: RL2Trial(GoalBandit(), trial_episodes=k), spec.ppo.num_envs)
+    rl2 = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    while rl2.global_step < steps:
+        rl2.set_progress(rl2.global_step / steps)
+        rl2.collect(envs)
+        rl2.update()
+    envs.close()
+
+    flat = AgentSpec.model_validate({**spec.model_dump(), "algo": "ppo", "rl2": None, "policy": {"hidden_sizes": [32]},
+                                     "ppo": {**spec.ppo.model_dump(), "bptt_length": None}})
+    envs = vector(GoalBandit, flat.ppo.num_envs)
+    memoryless = PPOAgent(flat, envs.single_observation_space, envs.single_action_space, seed=0)
+    while memoryless.global_step < steps:
+        memoryless.set_progress(memoryless.global_step / steps)
+        memoryless.collect(envs)
+        memoryless.update()
+    envs.close()
+
+    adapted = mean_reward_by_episode(rl2, RL2Trial(GoalBandit(), trial_episodes=k), trials=40, k=k)
+    baseline = mean_reward_by_episode(memoryless, GoalBandit(), trials=40, k=k)
+    assert adapted[1:].mean() > 0.6, adapted
+    assert adapted[1:].mean() > baseline[1:].mean() + 0.5, (adapted, baseline)
+
+
+# ------------------------------------------------------------------------------------ meta-test
+
+RL2_AGENT = {
+    "name": "tiny-rl2",
+    "algo": "rl2",
+    "rl2": {"trial_episodes": 3},
+    "policy": {"type": "gru", "recurrent_size": 16, "hidden_sizes": [16]},
+    "ppo": {"num_envs": 2, "rollout_steps": 100, "bptt_length": 25, "num_minibatches": 2, "update_epochs": 1},
+    "runtime": {"vector": "sync"},
+}
+
+
+def tiny_run(folder: Path, agent: dict) -> Path:
+    task = {**TASK, "stages": TASK["stages"][:1]}
+    (folder / "task.yaml").write_text(yaml.safe_dump(task))
+    (folder / "agent.yaml").write_text(yaml.safe_dump(agent))
+    doc = {"name": "tiny", "agent": "agent.yaml", "total_steps": 800, "phases": [{"task": "task.yaml"}],
+           "evaluation": {"every_steps": 800, "episodes": 1}, "checkpoint": {"every_steps": 400}}
+    (folder / "curriculum.yaml").write_text(yaml.safe_dump(doc))
+    return train(folder / "curriculum.yaml", run_dir=folder / "run", progress=False)
+
+
+def test_rl2_meta_test_report_has_the_adaptation_curve_and_plots(tmp_path, capsys):
+    run = tiny_run(tmp_path, RL2_AGENT)
+    metrics = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
+    assert {m["length_mean"] for m in metrics} == {None, 300}  # a logged "episode" is a trial of 3
+    assert any(m["success_first_episode"] is not None for m in metrics) and "eval_success_rate" in metrics[-1]
+
+    out = tmp_path / "rl2.json"
+    assert main(["eval", str(run), "--episodes", "4", "--out", str(out)]) == 0
+    assert "episode 1" in capsys.readouterr().out
+    report = json.loads(out.read_text())
+    assert report["algo"] == "rl2" and report["trial_episodes"] == 3 and report["split"] == "test"
+    (row,) = report["rows"]
+    assert (row["trials"], row["episodes"], row["mean_length"]) == (4, 12, 100)
+    assert [e["episode"] for e in row["per_episode"]] == [1, 2, 3]
+    for e in row["per_episode"]:
+        assert 0.0 <= e["success_ci95"][0] <= e["success_rate"] <= e["success_ci95"][1] <= 1.0
+    assert np.mean([e["success_rate"] for e in row["per_episode"]]) == pytest.approx(row["success_rate"])
+    assert np.mean([e["mean_return"] for e in row["per_episode"]]) == pytest.approx(row["mean_return"])
+
+    assert main(["plot", str(out), "--out", str(tmp_path / "adapt.png")]) == 0
+    assert (tmp_path / "adapt.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_memoryless_policy_evaluated_in_trials_has_a_flat_adaptation_curve(tmp_path):
+    """The baseline: PPO played over the same trials. Without randomisation every episode of a
+    trial starts from the same state (same goal), so a deterministic memoryless policy repeats
+    itself exactly: identical returns at every episode index."""
+    agent = {k: v for k, v in RL2_AGENT.items() if k not in ("algo", "rl2")}
+    agent["policy"] = {"hidden_sizes": [16]}
+    agent["ppo"] = {**agent["ppo"], "bptt_length": None}
+    run = tiny_run(tmp_path, agent)
+    out = tmp_path / "ppo.json"
+    assert main(["eval", str(run), "--episodes", "3", "--trial-episodes", "3", "--out", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["rows"]
+    returns = [e["mean_return"] for e in row["per_episode"]]
+    assert len(returns) == 3 and returns[0] == pytest.approx(returns[1]) == pytest.approx(returns[2])
+
+
+def test_rl2_agent_reads_the_augmented_observation():
+    spec = rl2_spec()
+    obs_space, act_space = Box(-1, 1, (5,), np.float32), Box(-1, 1, (2,), np.float32)
+    assert agent_observation_space(spec, obs_space, act_space).shape == (5 + 2 + 2,)
+    flat = AgentSpec.model_validate({"name": "ppo"})
+    assert agent_observation_space(flat, obs_space, act_space) is obs_space
+
+
+@pytest.mark.parametrize(
+    "agent,fragment",
+    [
+        ({"algo": "rl2"}, "algo 'rl2' needs an 'rl2' section"),
+        ({"algo": "rl2", "rl2": {"trial_episodes": 2}}, "needs a recurrent policy"),
+        ({"rl2": {"trial_episodes": 2}}, "an 'rl2' section needs algo: rl2"),
+        ({"algo": "rl2", "rl2": {"trial_episodes": 0}, "policy": {"type": "gru"}}, "rl2.trial_episodes"),
+        ({"policy": {"type": "gru"}, "ppo": {"rollout_steps": 100, "bptt_length": 30}}, "must divide 'rollout_steps'"),
+    ],
+)
+def test_bad_rl2_agent_files_are_one_line_errors(agent, fragment, tmp_path, capsys):
+    path = tmp_path / "agent.yaml"
+    path.write_text(yaml.safe_dump({"name": "bad", **agent}))
+    assert main(["validate", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and fragment in err[0] and str(path) in err[0], err
