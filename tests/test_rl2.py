@@ -172,6 +172,17 @@ def test_truncated_bptt_chunks_replay_the_states_the_agent_acted_with():
 
 # ------------------------------------------------------------------------------------- learning
 
+def trained(spec: AgentSpec, env_fn, steps: int) -> PPOAgent:
+    envs = vector(env_fn, spec.ppo.num_envs)
+    agent = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    while agent.global_step < steps:
+        agent.set_progress(agent.global_step / steps)
+        agent.collect(envs)
+        agent.update()
+    envs.close()
+    return agent
+
+
 def mean_reward_by_episode(agent: PPOAgent, env: gymnasium.Env, trials: int, k: int) -> np.ndarray:
     """Deterministic trials of k one-step episodes; mean reward of each episode index."""
     rewards = np.zeros((trials, k))
@@ -193,23 +204,10 @@ def test_rl2_infers_the_goal_from_reward_and_beats_a_memoryless_policy():
     2-4 average 1.0 (episode 1: -0.1), memoryless PPO about 0.0."""
     k, steps = 4, 12_000
     spec = rl2_spec()
-    envs = vector(lambda: RL2Trial(GoalBandit(), trial_episodes=k), spec.ppo.num_envs)
-    rl2 = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
-    while rl2.global_step < steps:
-        rl2.set_progress(rl2.global_step / steps)
-        rl2.collect(envs)
-        rl2.update()
-    envs.close()
-
+    rl2 = trained(spec, lambda: RL2Trial(GoalBandit(), trial_episodes=k), steps)
     flat = AgentSpec.model_validate({**spec.model_dump(), "algo": "ppo", "rl2": None, "policy": {"hidden_sizes": [32]},
                                      "ppo": {**spec.ppo.model_dump(), "bptt_length": None}})
-    envs = vector(GoalBandit, flat.ppo.num_envs)
-    memoryless = PPOAgent(flat, envs.single_observation_space, envs.single_action_space, seed=0)
-    while memoryless.global_step < steps:
-        memoryless.set_progress(memoryless.global_step / steps)
-        memoryless.collect(envs)
-        memoryless.update()
-    envs.close()
+    memoryless = trained(flat, GoalBandit, steps)
 
     adapted = mean_reward_by_episode(rl2, RL2Trial(GoalBandit(), trial_episodes=k), trials=40, k=k)
     baseline = mean_reward_by_episode(memoryless, GoalBandit(), trials=40, k=k)
@@ -229,24 +227,30 @@ RL2_AGENT = {
 }
 
 
-def tiny_run(folder: Path, agent: dict) -> Path:
-    task = {**TASK, "stages": TASK["stages"][:1]}
+def tiny_run(folder: Path, agent: dict, stages: int = 1) -> Path:
+    """A short run on the Pendulum stand-in task; with 2 stages the first always succeeds and
+    is passed once 2 trials (or episodes) are done."""
+    task = {**TASK, "stages": TASK["stages"][:stages]}
     (folder / "task.yaml").write_text(yaml.safe_dump(task))
     (folder / "agent.yaml").write_text(yaml.safe_dump(agent))
     doc = {"name": "tiny", "agent": "agent.yaml", "total_steps": 800, "phases": [{"task": "task.yaml"}],
+           "promotion": {"threshold": 0.9, "window": 2, "min_steps": 0}, "replay": {"fraction": 0.0},
            "evaluation": {"every_steps": 800, "episodes": 1}, "checkpoint": {"every_steps": 400}}
     (folder / "curriculum.yaml").write_text(yaml.safe_dump(doc))
     return train(folder / "curriculum.yaml", run_dir=folder / "run", progress=False)
 
 
-def test_rl2_meta_test_report_has_the_adaptation_curve_and_plots(tmp_path, capsys):
-    run = tiny_run(tmp_path, RL2_AGENT)
+def test_rl2_runs_a_curriculum_and_its_meta_test_report_has_the_adaptation_curve(tmp_path, capsys):
+    run = tiny_run(tmp_path, RL2_AGENT, stages=2)
     metrics = [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines()]
     assert {m["length_mean"] for m in metrics} == {None, 300}  # a logged "episode" is a trial of 3
     assert any(m["success_first_episode"] is not None for m in metrics) and "eval_success_rate" in metrics[-1]
+    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
+    assert [(e["kind"], e["to_stage"]) for e in events] == [("promote", "hard")]  # after 2 trials of `easy`
+    assert metrics[-1]["stage"] == "hard"
 
     out = tmp_path / "rl2.json"
-    assert main(["eval", str(run), "--episodes", "4", "--out", str(out)]) == 0
+    assert main(["eval", str(run), "--episodes", "4", "--stage", "easy", "--out", str(out)]) == 0
     assert "episode 1" in capsys.readouterr().out
     report = json.loads(out.read_text())
     assert report["algo"] == "rl2" and report["trial_episodes"] == 3 and report["split"] == "test"

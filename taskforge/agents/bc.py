@@ -42,7 +42,7 @@ from taskforge.agents.runtime import torch_threads, update_threads
 
 def check_supported(agent: PPOAgent) -> None:
     if agent.policy.recurrent:
-        raise ValueError("warm start from demonstrations supports MLP policies only (policy.type: mlp), not an LSTM")
+        raise ValueError("warm start from demonstrations supports MLP policies only (policy.type: mlp), not an LSTM or GRU")
 
 
 def returns_to_go(rewards: np.ndarray, episode_starts: np.ndarray, truncated: np.ndarray, gamma: float) -> np.ndarray:

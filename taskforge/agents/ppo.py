@@ -189,7 +189,7 @@ class PPOAgent:
         `actions` are env actions; observations are normalised with the current statistics at
         every update. MLP policies only."""
         if self.policy.recurrent:
-            raise ValueError("the demonstration regulariser supports MLP policies only, not an LSTM")
+            raise ValueError("the demonstration regulariser supports MLP policies only, not an LSTM or GRU")
         ppo = self.spec.ppo
         batch = batch_size or ppo.num_envs * ppo.rollout_steps // ppo.num_minibatches
         raw = self.policy.actions.from_env(torch.as_tensor(np.asarray(actions, dtype=np.float32)))
