@@ -184,7 +184,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         source = f"policy at step {agent.global_step:,}"
     frames, successes = render_episodes(env, act, Path(args.out), episodes=args.episodes, seed=args.seed, camera=args.camera,
                                         width=args.width, height=args.height, max_frames=args.max_frames)
-    print(f"wrote {args.out}: {frames} frames, {source}, stage {env.stage}, success {sum(successes)}/{len(successes)}")
+    print(f"wrote {args.out}: {frames} frames, {source}, stage {env.unwrapped.stage}, success {sum(successes)}/{len(successes)}")
     return 0
 
 

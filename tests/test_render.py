@@ -39,3 +39,27 @@ def test_render_scripted_episode_frames_are_not_blank(tmp_path, task, stage):
 def test_render_rejects_a_bad_camera_and_output(tmp_path):
     proc, _ = render(tmp_path, "tasks/xarm7/reach.yaml", "--camera", "nope", "--max-frames", "2")
     assert proc.returncode == 2 and "no camera 'nope'" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_render_an_rl2_run_plays_a_whole_trial(tmp_path):
+    """An RL² policy needs the augmented observation: render wraps the env in trials, so one
+    rendered "episode" is K = 2 episodes of reach (2 x 30 steps) and the policy runs through the
+    inner reset."""
+    import yaml
+
+    from taskforge.training import train
+
+    task = yaml.safe_load((ROOT / "tasks/metaworld/reach.yaml").read_text())
+    task["max_episode_steps"] = 30
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump(task))
+    agent = {"name": "tiny-rl2", "algo": "rl2", "rl2": {"trial_episodes": 2},
+             "policy": {"type": "gru", "recurrent_size": 8, "hidden_sizes": [8]},
+             "ppo": {"num_envs": 1, "rollout_steps": 30, "num_minibatches": 1, "update_epochs": 1},
+             "runtime": {"vector": "sync"}}
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
+    (tmp_path / "cur.yaml").write_text(yaml.safe_dump(
+        {"name": "tiny", "agent": "agent.yaml", "total_steps": 30, "phases": [{"task": "task.yaml"}]}))
+    run = train(tmp_path / "cur.yaml", run_dir=tmp_path / "run", progress=False)
+    proc, frames = render(tmp_path, str(run), "--width", "64", "--height", "48")
+    assert proc.returncode == 0, proc.stderr
+    assert len(frames) == 60 and ("success 0/1" in proc.stdout or "success 1/1" in proc.stdout), proc.stdout
