@@ -77,6 +77,8 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     ]
     for i, phase in enumerate(cur.phases):
         lines.append(f"  phase {i + 1}: {phase.task.name} ({phase.task_file}): {' -> '.join(phase.stages)}")
+        if cur.agent.algo == "rl2" and phase.task.goals.observable:
+            lines.append("    note: the goal is observable here, so RL² has nothing to infer (meta-RL hides it: goals.observable: false)")
     lines.append(
         f"  evaluate every {spec.evaluation.every_steps:,} steps on {spec.evaluation.episodes} "
         f"{spec.evaluation.split} {'trials' if cur.agent.algo == 'rl2' else 'episodes'}; checkpoint every {spec.checkpoint.every_steps:,} steps"

@@ -305,3 +305,15 @@ def test_bad_rl2_agent_files_are_one_line_errors(agent, fragment, tmp_path, caps
     assert main(["validate", str(path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and fragment in err[0] and str(path) in err[0], err
+
+
+def test_validate_notes_an_rl2_curriculum_whose_goal_is_observable(tmp_path, capsys):
+    task = yaml.safe_load((ROOT / "tasks/metaworld/reach.yaml").read_text())
+    task["goals"]["observable"] = True
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump(task))
+    (tmp_path / "cur.yaml").write_text(yaml.safe_dump(
+        {"name": "seen-goal", "agent": str(ROOT / "agents/rl2.yaml"), "total_steps": 1000, "phases": [{"task": "task.yaml"}]}))
+    assert main(["validate", str(tmp_path / "cur.yaml")]) == 0
+    assert "note: the goal is observable here, so RL² has nothing to infer" in capsys.readouterr().out
+    assert main(["validate", str(ROOT / "curricula/ml1_reach_rl2.yaml")]) == 0
+    assert "note:" not in capsys.readouterr().out
