@@ -71,6 +71,7 @@ def advance_run(curriculum: Path, run_dir: Path, seed: int, total: int, chunk: i
     ckpt = run_dir / "checkpoint.pt"
     done = load_checkpoint(ckpt)["agent"]["global_step"] if ckpt.exists() else 0
     if done < total:
-        train(curriculum, run_dir=run_dir, seed=seed, steps=min(total, done + chunk), resume=ckpt.exists(), progress=False)
+        # the run's length is `total` (the learning-rate schedule spans it); the chunk only pauses it
+        train(curriculum, run_dir=run_dir, seed=seed, steps=total, stop_at=done + chunk, resume=ckpt.exists(), progress=False)
         done = load_checkpoint(ckpt)["agent"]["global_step"]
     return done

@@ -77,17 +77,24 @@ def cmd_tasks(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from taskforge.training import Interrupted, train
+    from taskforge.training import CHECKPOINT, FINAL, Interrupted, load_checkpoint, train
 
     if args.steps is not None and args.steps < 1:
         raise SpecError.single("--steps", "", f"expected a positive number of steps (got {args.steps})")
+    if args.stop_at is not None and args.stop_at < 1:
+        raise SpecError.single("--stop-at", "", f"expected a positive step count (got {args.stop_at})")
     try:
         run_dir = train(args.curriculum, run_dir=args.run_dir, seed=args.seed, steps=args.steps,
-                        resume=args.resume, progress=not args.no_progress)
+                        resume=args.resume, progress=not args.no_progress, stop_at=args.stop_at)
     except Interrupted as exc:
         print(str(exc), file=sys.stderr)
         return 130
-    print(f"done: {run_dir} (final policy {run_dir / 'final.pt'})")
+    state = load_checkpoint(run_dir / CHECKPOINT)
+    step, total = state["agent"]["global_step"], state["config"]["total_steps"]
+    if step >= total:
+        print(f"done: {run_dir} (final policy {run_dir / FINAL})")
+    else:
+        print(f"paused at step {step:,} of {total:,}: {run_dir} (continue with --resume)")
     return 0
 
 
@@ -207,6 +214,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, help="default: the curriculum's seed")
     p.add_argument("--steps", type=int, help="total env steps (default: the curriculum's total_steps)")
     p.add_argument("--resume", action="store_true", help="continue from the run directory's last checkpoint")
+    p.add_argument("--stop-at", type=int, metavar="STEP",
+                   help="pause at this env step with a checkpoint (e.g. a job's time limit); the learning-rate "
+                        "schedule still spans --steps; continue later with --resume")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (e.g. in logs)")
     p.set_defaults(func=cmd_train)
 

@@ -104,6 +104,23 @@ def test_resume_continues_step_count_and_curriculum_state(tmp_path):
     assert second["curriculum"]["events"][:len(first["curriculum"]["events"])] == first["curriculum"]["events"]
 
 
+def test_stop_at_pauses_without_bending_the_learning_rate_schedule(tmp_path, capsys):
+    cur = write_curriculum(tmp_path, total_steps=1200)
+    whole = train(cur, run_dir=tmp_path / "whole", progress=False)
+    run = tmp_path / "chunked"
+    assert main(["train", str(cur), "--run-dir", str(run), "--stop-at", "600", "--no-progress"]) == 0
+    assert "paused at step 600 of 1,200" in capsys.readouterr().out
+    assert load_checkpoint(run / "checkpoint.pt")["agent"]["global_step"] == 600
+    assert not (run / "final.pt").exists()  # a paused run has no final policy yet
+    assert main(["train", str(cur), "--run-dir", str(run), "--resume", "--no-progress"]) == 0
+    assert (run / "final.pt").is_file()
+    # the schedule spans the whole run in both: annealing is not restarted per chunk
+    lr = lambda d: [(m["step"], m["learning_rate"]) for m in read_jsonl(d / "metrics.jsonl")]
+    assert lr(run) == lr(whole)
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "bad"), "--stop-at", "0"]) == 2
+    assert "--stop-at" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
 def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
     cur = write_curriculum(tmp_path, total_steps=100_000, checkpoint={"every_steps": 100_000})
     run = tmp_path / "run"

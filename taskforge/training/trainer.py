@@ -77,9 +77,15 @@ def train(
     steps: int | None = None,
     resume: bool = False,
     progress: bool = True,
+    stop_at: int | None = None,
 ) -> Path:
     """Train along a curriculum; returns the run directory. Raises `SpecError` for bad input
-    (before writing anything) and `Interrupted` after saving a checkpoint on Ctrl-C/SIGTERM."""
+    (before writing anything) and `Interrupted` after saving a checkpoint on Ctrl-C/SIGTERM.
+
+    `steps` is the run's length: it sets the learning-rate schedule and is stored with the run.
+    `stop_at` pauses earlier (checkpoint, no final policy) so that a long run can be split into
+    jobs; the schedule still spans `steps`, which a chunked `steps` on every resume would not
+    (each chunk would anneal the learning rate to zero)."""
     cur = load_curriculum(curriculum_file)
     run_dir = Path(run_dir) if run_dir else Path("runs") / f"{cur.spec.name}-seed{cur.spec.seed if seed is None else seed}"
     ckpt_file = run_dir / CHECKPOINT
@@ -101,6 +107,7 @@ def train(
         raise SpecError.single(run_dir, "", f"already holds a run ({CHECKPOINT}); pass --resume to continue it or choose another --run-dir")
     seed = cur.spec.seed if seed is None else seed
     total = steps or (state["config"]["total_steps"] if state else cur.spec.total_steps)
+    until = total if stop_at is None else min(total, stop_at)
     config = run_config(cur, seed, total)
 
     agent_spec = cur.agent
@@ -140,7 +147,7 @@ def train(
     driver = CurriculumDriver(scheduler, envs, scheduler.phase, cur.phases[scheduler.phase].stages[-1])
     bar = tqdm(total=total, initial=agent.global_step, unit="step", disable=not progress, dynamic_ncols=True, file=sys.stderr)
     try:
-        while agent.global_step < total:
+        while agent.global_step < until:
             agent.set_progress(agent.global_step / total)
             start_step, start_time = agent.global_step, time.perf_counter()
             agent.collect(envs, driver.on_step)
@@ -199,7 +206,8 @@ def train(
         except Exception:  # workers already gone after a Ctrl-C reached them too
             pass
     save_checkpoint(last_good, ckpt_file)
-    save_checkpoint({"config": config, "agent": last_good["agent"]}, run_dir / FINAL)
+    if agent.global_step >= total:
+        save_checkpoint({"config": config, "agent": last_good["agent"]}, run_dir / FINAL)
     return run_dir
 
 
