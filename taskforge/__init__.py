@@ -6,12 +6,15 @@ Public API (stable):
     taskforge.SpecError                                        -> every user mistake
 """
 
+import ctypes.util
 import os
 
 # MuJoCo chooses its OpenGL backend once, when first imported. Without a display, its default
-# (GLFW) cannot render at all; software OSMesa (Debian's libosmesa6) works everywhere. A user
-# who set MUJOCO_GL (e.g. egl on a GPU machine) keeps their choice.
-if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY"):
+# (GLFW) cannot render at all; software OSMesa (Debian's libosmesa6) works everywhere it is
+# installed. Only then is it chosen: with MUJOCO_GL=osmesa and no libOSMesa, `import mujoco`
+# itself fails, and training needs no OpenGL at all. A user who set MUJOCO_GL (e.g. egl on a
+# GPU machine) keeps their choice.
+if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and ctypes.util.find_library("OSMesa"):
     os.environ["MUJOCO_GL"] = "osmesa"
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 

@@ -7,6 +7,7 @@ chose nothing (`MUJOCO_GL=egl` is faster on a GPU machine).
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 from pathlib import Path
 
@@ -19,6 +20,19 @@ from taskforge.envs import TaskEnv
 from taskforge.spec import SpecError
 
 DEFAULT_CAMERAS = {"metaworld": "corner", "xarm7": "front"}
+
+
+def _make_renderer(model: mujoco.MjModel, height: int, width: int, out: Path) -> mujoco.Renderer:
+    """An off-screen renderer, or one clear line when this machine has no OpenGL to give it: the
+    usual case is a headless machine without libOSMesa, where MuJoCo falls back to GLFW."""
+    backend = os.environ.get("MUJOCO_GL", "").lower() or "glfw"
+    hint = "install libOSMesa (Debian: apt install libosmesa6), or set MUJOCO_GL=egl on a GPU machine"
+    if backend == "glfw" and not os.environ.get("DISPLAY"):  # GLFW needs a display; fail before it warns
+        raise SpecError.single(out, "", f"no OpenGL for off-screen rendering: no display and no libOSMesa; {hint}")
+    try:
+        return mujoco.Renderer(model, height, width)
+    except (mujoco.FatalError, RuntimeError) as exc:
+        raise SpecError.single(out, "", f"no OpenGL context for rendering (MUJOCO_GL={backend}: {str(exc).splitlines()[0]}); {hint}") from None
 
 
 def render_episodes(
@@ -49,7 +63,7 @@ def render_episodes(
         obs, _ = env.reset(seed=seed + k)
         model = task_env.backend.model(task_env._episode["task"])
         if renderer is None or renderer.model is not model:
-            renderer = mujoco.Renderer(model, height, width)
+            renderer = _make_renderer(model, height, width, out)
             if camera is not None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
                 cams = [model.camera(i).name for i in range(model.ncam)]
                 raise SpecError.single(task_env.file, "camera", f"no camera '{camera}'; expected one of {', '.join(cams)}")

@@ -13,19 +13,20 @@ import pytest
 
 from tests.conftest import ROOT
 
-pytestmark = pytest.mark.skipif(
+needs_osmesa = pytest.mark.skipif(
     ctypes.util.find_library("OSMesa") is None, reason="libOSMesa not installed (Debian: libosmesa6; .ci/run installs it)"
 )
 
 
-def render(tmp_path, *args: str) -> tuple[subprocess.CompletedProcess, list[np.ndarray]]:
+def render(tmp_path, *args: str, **env_extra: str) -> tuple[subprocess.CompletedProcess, list[np.ndarray]]:
     out = tmp_path / "video.gif"
-    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY")}
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY")} | env_extra
     proc = subprocess.run([sys.executable, "-m", "taskforge.cli", "render", *args, "--out", str(out)],
                           cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     return proc, (imageio.mimread(out) if out.exists() else [])
 
 
+@needs_osmesa
 @pytest.mark.parametrize("task,stage", [("tasks/xarm7/reach.yaml", "reach"), ("tasks/metaworld/pick_place.yaml", "reach")])
 def test_render_scripted_episode_frames_are_not_blank(tmp_path, task, stage):
     proc, frames = render(tmp_path, task, "--stage", stage, "--max-frames", "6", "--width", "96", "--height", "72")
@@ -36,11 +37,13 @@ def test_render_scripted_episode_frames_are_not_blank(tmp_path, task, stage):
     assert not np.array_equal(frames[0], frames[-1])  # the robot moved
 
 
+@needs_osmesa
 def test_render_rejects_a_bad_camera_and_output(tmp_path):
     proc, _ = render(tmp_path, "tasks/xarm7/reach.yaml", "--camera", "nope", "--max-frames", "2")
     assert proc.returncode == 2 and "no camera 'nope'" in proc.stderr and "Traceback" not in proc.stderr
 
 
+@needs_osmesa
 def test_render_an_rl2_run_plays_a_whole_trial(tmp_path):
     """An RL² policy needs the augmented observation: render wraps the env in trials, so one
     rendered "episode" is K = 2 episodes of reach (2 x 30 steps) and the policy runs through the
@@ -63,3 +66,11 @@ def test_render_an_rl2_run_plays_a_whole_trial(tmp_path):
     proc, frames = render(tmp_path, str(run), "--width", "64", "--height", "48")
     assert proc.returncode == 0, proc.stderr
     assert len(frames) == 60 and ("success 0/1" in proc.stdout or "success 1/1" in proc.stdout), proc.stdout
+
+
+def test_render_without_opengl_says_so_in_one_line(tmp_path):
+    """A headless machine without libOSMesa: MuJoCo falls back to GLFW, which cannot open a
+    context; render must say what to install instead of crashing inside MuJoCo."""
+    proc, frames = render(tmp_path, "tasks/xarm7/reach.yaml", "--max-frames", "2", MUJOCO_GL="glfw")
+    assert proc.returncode == 2 and frames == [], proc.stderr
+    assert proc.stderr.count("\n") == 1 and "libosmesa6" in proc.stderr and "Traceback" not in proc.stderr
