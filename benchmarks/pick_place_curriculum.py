@@ -7,7 +7,8 @@ The full budget (2 variants x 3 seeds x 2M steps) takes many hours on 2 cores, s
 works in chunks: each call advances every run by at most `--chunk-steps` (resuming from its
 checkpoint) and rewrites the result table from what exists so far. Run it again to continue.
 Both variants evaluate the `place` stage on 20 held-out goals every 100k steps (the curricula's
-`evaluation` settings), so their curves measure the same thing.
+`evaluation` settings), so their curves measure the same thing. The curves (per seed and mean,
+with the curriculum's stage over time) go to `results/pick_place_curriculum.png`.
 """
 
 from __future__ import annotations
@@ -21,13 +22,54 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import advance_run, print_table, write_result  # noqa: E402
+from benchmarks.common import RESULTS, advance_run, print_table, write_result  # noqa: E402
 from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
 from taskforge.training.metrics import read_jsonl  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {"curriculum": ROOT / "curricula/pick_place.yaml", "flat": ROOT / "benchmarks/configs/pick_place_flat.yaml"}
 RUNS = ROOT / "benchmarks/runs/pick_place"
+STAGES = ["reach", "push", "pick", "place"]
+
+
+def plot_curves(runs: dict[str, dict], out: Path) -> Path:
+    """Held-out `place` success vs env steps (thin: each seed, thick: the mean over the seeds that
+    reached that evaluation) and, below, the stage each curriculum seed trained on."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, ax_stage) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=[3, 1.2])
+    for colour, variant in zip(("tab:blue", "tab:orange"), VARIANTS):
+        curves = [dict(r["eval_place_success"]) for r in runs.values() if r["variant"] == variant]
+        for curve in curves:
+            ax.plot(list(curve), list(curve.values()), color=colour, lw=0.8, alpha=0.4)
+        steps = sorted({s for c in curves for s in c})
+        if steps:
+            mean = [np.mean([c[s] for c in curves if s in c]) for s in steps]
+            ax.plot(steps, mean, "o-", color=colour, lw=2, label=f"{variant} (mean of {len(curves)} seed{'s' * (len(curves) > 1)})")
+    for r in runs.values():
+        if r["variant"] == "curriculum":
+            xs, ys = [0], [0]
+            for step, stage in r["promotions"]:
+                xs.append(step)
+                ys.append(STAGES.index(stage))
+            xs.append(r["steps_done"])
+            ys.append(ys[-1])
+            ax_stage.step(xs, ys, where="post", lw=1, label=f"seed {r['seed']}")
+    ax.set_ylabel("held-out place success")
+    ax.set_ylim(-0.02, 1.02)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title("Meta-World pick-place without demos: curriculum vs flat (ML1 test goals)")
+    ax_stage.set_yticks(range(len(STAGES)), STAGES)
+    ax_stage.set_ylabel("curriculum stage")
+    ax_stage.set_xlabel("environment steps")
+    ax_stage.legend(loc="lower right", fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
 
 
 def main() -> None:
@@ -69,6 +111,7 @@ def main() -> None:
     missing = len(args.seeds) * len(VARIANTS) - len(runs)
     remaining = sum(max(0, args.steps - r["steps_done"]) for r in runs.values()) + missing * args.steps
     print(f"remaining: {remaining:,} env steps ({len(runs)} runs started, {missing} not started)")
+    print(f"curves: {plot_curves(runs, RESULTS / 'pick_place_curriculum.png')}")
     write_result("pick_place_curriculum", {"seeds": args.seeds, "steps": args.steps, "runs": runs, "remaining_steps": remaining,
                                            "complete": remaining == 0})
 
