@@ -91,7 +91,7 @@ def main() -> None:
             metrics = read_jsonl(run_dir / "metrics.jsonl")
             runs[f"{variant}-seed{seed}"] = {
                 "variant": variant, "seed": seed, "steps_done": load_checkpoint(ckpt)["agent"]["global_step"],
-                "evals": read_jsonl(run_dir / "meta_evals.jsonl"),
+                "evals": [e for e in read_jsonl(run_dir / "meta_evals.jsonl") if e["trials"] == args.trials],
                 "train_last_episode_success": [(m["step"], m["success_rate"]) for m in metrics if m.get("success_rate") is not None],
                 "steps_per_s": float(np.median([m["steps_per_s"] for m in metrics])),
             }

@@ -25,7 +25,7 @@ from taskforge.agents import (
     compute_gae,
     set_torch_threads,
 )
-from taskforge.agents.policies import ActorCritic
+from taskforge.agents.policies import ActorCritic, RecurrentTorso
 from taskforge.spec.agent import AgentSpec, PolicySpec
 
 OBS_SPACE = gymnasium.spaces.Box(-np.inf, np.inf, shape=(3,), dtype=np.float32)
@@ -251,6 +251,32 @@ def test_lstm_sequence_evaluation_resets_at_episode_starts_inside_the_sequence()
         )
     torch.testing.assert_close(logprob[k:, :1], suffix_logprob, rtol=0, atol=1e-6)
     torch.testing.assert_close(value[k:, :1], suffix_value, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("core", ["lstm", "gru"])
+def test_recurrent_torso_runs_segments_exactly_as_stepping_one_step_at_a_time(core):
+    """The torso runs the core over whole segments between episode starts; the reference is the
+    plain per-step loop that zeroes the state wherever an env starts (starts at t=0, mid-sequence,
+    in one env only, in both, and on the last step)."""
+    torch.manual_seed(0)
+    torso = RecurrentTorso(3, PolicySpec(type=core, hidden_sizes=[16], recurrent_size=8))
+    T, N = 12, 3
+    x = torch.randn(T, N, 3)
+    starts = torch.zeros(T, N, dtype=torch.bool)
+    starts[0, 1] = starts[4, 0] = starts[4, 2] = starts[7, 1] = starts[T - 1, 0] = True
+    state = tuple(torch.randn(1, N, 8) for _ in range(2 if core == "lstm" else 1))
+
+    expected, ref_state = [], state
+    for x_t, start_t in zip(x, starts):
+        ref_state = tuple(part * (~start_t).float().view(1, -1, 1) for part in ref_state)
+        out, ref_state = torso.core(x_t.unsqueeze(0), ref_state if core == "lstm" else ref_state[0])
+        ref_state = ref_state if core == "lstm" else (ref_state,)
+        expected.append(out)
+    with torch.no_grad():
+        features, final_state = torso(x, state, starts)
+        torch.testing.assert_close(features, torso.net(torch.cat(expected)), rtol=0, atol=1e-6)
+        for part, ref_part in zip(final_state, ref_state):
+            torch.testing.assert_close(part, ref_part, rtol=0, atol=1e-6)
 
 
 @pytest.mark.parametrize("chunk_length", [None, 4])

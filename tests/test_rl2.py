@@ -317,3 +317,16 @@ def test_validate_notes_an_rl2_curriculum_whose_goal_is_observable(tmp_path, cap
     assert "note: the goal is observable here, so RL² has nothing to infer" in capsys.readouterr().out
     assert main(["validate", str(ROOT / "curricula/ml1_reach_rl2.yaml")]) == 0
     assert "note:" not in capsys.readouterr().out
+
+
+def test_validate_notes_bptt_chunks_that_never_cross_an_episode_start(tmp_path, capsys):
+    """ML1 reach episodes are 200 steps: 50-step chunks all start on episode starts (note), the
+    shipped 120-step chunks straddle them (no note)."""
+    agent = yaml.safe_load((ROOT / "agents/rl2.yaml").read_text())
+    agent["ppo"].update(rollout_steps=500, bptt_length=50)
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
+    (tmp_path / "cur.yaml").write_text(yaml.safe_dump(
+        {"name": "aligned", "agent": "agent.yaml", "total_steps": 1000,
+         "phases": [{"task": str(ROOT / "tasks/metaworld/reach.yaml")}]}))
+    assert main(["validate", str(tmp_path / "cur.yaml")]) == 0
+    assert "note: bptt_length 50 divides the episode length of reach" in capsys.readouterr().out

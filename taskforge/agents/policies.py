@@ -81,10 +81,12 @@ class RecurrentTorso(nn.Module):
     """An LSTM or GRU over the raw input, then an MLP (as SB3's RecurrentPPO for vector
     observations). RL² uses the GRU (Duan et al., 2016).
 
-    The core is stepped one time step at a time so the hidden state can be zeroed wherever an
-    episode starts, both when acting and when re-running sequences in the update (LSTM details
-    #3 and #5); otherwise the update would see a different state from the one the action was
-    sampled with. For RL² "episode" means trial: the env wrapper reports only trial starts.
+    The hidden state is zeroed wherever an episode starts, both when acting and when re-running
+    sequences in the update (LSTM details #3 and #5); otherwise the update would see a different
+    state from the one the action was sampled with. Between two time steps at which some env
+    starts an episode, the core runs over the whole segment in one call (PyTorch's own loop), so
+    a long BPTT sequence costs one call per episode start rather than one per step. For RL²
+    "episode" means trial: the env wrapper reports only trial starts.
     """
 
     def __init__(self, in_dim: int, spec: PolicySpec) -> None:
@@ -106,11 +108,13 @@ class RecurrentTorso(nn.Module):
         return tuple(torch.zeros(size) for _ in range(self._parts))
 
     def forward(self, x: torch.Tensor, state: Hidden, episode_starts: torch.Tensor) -> tuple[torch.Tensor, Hidden]:
+        starts = torch.nonzero(episode_starts.any(dim=1)).flatten().tolist()
+        bounds = sorted({0, *starts, x.shape[0]})
         outputs = []
-        for x_t, start_t in zip(x, episode_starts):
-            keep = (~start_t).float().view(1, -1, 1)  # LSTM detail #3: zero the state where an episode starts
+        for begin, end in zip(bounds[:-1], bounds[1:]):
+            keep = (~episode_starts[begin]).float().view(1, -1, 1)  # LSTM detail #3: zero the state where an episode starts
             state = tuple(part * keep for part in state)
-            out, state = self.core(x_t.unsqueeze(0), state if self._parts == 2 else state[0])
+            out, state = self.core(x[begin:end], state if self._parts == 2 else state[0])
             state = state if self._parts == 2 else (state,)
             outputs.append(out)
         return self.net(torch.cat(outputs)), state
