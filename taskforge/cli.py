@@ -133,7 +133,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.trial_episodes is not None and args.trial_episodes < 1:
         raise SpecError.single("--trial-episodes", "", f"expected at least 1 episode per trial (got {args.trial_episodes})")
     report = evaluate_run(args.run, split=args.split, trials=args.episodes, stages=args.stage, seed=args.seed,
-                          trial_episodes=args.trial_episodes)
+                          trial_episodes=args.trial_episodes, deterministic=not args.stochastic)
     print(format_table(report))
     if args.out:
         save_json(report, Path(args.out))
@@ -245,6 +245,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "memoryless baseline's flat adaptation curve)")
     p.add_argument("--stage", action="append", help="only these stages (repeatable)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--stochastic", action="store_true",
+                   help="sample actions from the policy (seeded by --seed) instead of taking its mean; an RL² "
+                        "policy explores by sampling, as in Duan et al.'s meta-test")
     p.add_argument("--out", help="write the report as JSON here")
     p.set_defaults(func=cmd_eval)
 

@@ -185,6 +185,36 @@ def test_eval_writes_a_well_formed_report(tmp_path, capsys):
     assert report["rows"][0]["success_rate"] == 1.0 and report["rows"][1]["success_rate"] == 0.0
 
 
+def test_stochastic_eval_is_seeded_and_leaves_the_agents_random_stream_alone(tmp_path, capsys):
+    """`--stochastic` samples actions: the same seed gives the same report, another seed or the
+    mean action a different one; evaluating never moves the agent's own generator (the trainer
+    evaluates mid-run)."""
+    from taskforge.evaluation.evaluate import evaluate
+    from taskforge.evaluation.report import load_agent
+    from taskforge.spec import TaskSpec
+
+    run = train(write_curriculum(tmp_path, total_steps=400), run_dir=tmp_path / "run", progress=False)
+
+    def returns(*args: str) -> list[float]:
+        out = tmp_path / "report.json"
+        assert main(["eval", str(run), "--episodes", "2", "--stage", "easy", "--out", str(out), *args]) == 0
+        report = json.loads(out.read_text())
+        return [report["actions"], report["rows"][0]["mean_return"]]
+
+    sampled = returns("--stochastic", "--seed", "1")
+    assert sampled[0] == "sampled" and "sampled actions" in capsys.readouterr().out
+    assert returns("--stochastic", "--seed", "1") == sampled
+    assert returns("--stochastic", "--seed", "2")[1] != sampled[1]
+    mean = returns("--seed", "1")
+    assert mean[0] == "mean" and mean[1] != sampled[1]
+
+    agent, config, _ = load_agent(run / "final.pt")
+    before = agent.generator.get_state()
+    evaluate(agent, TaskSpec.model_validate(config["phases"][0]["task"]), config["phases"][0]["task_file"], "easy", "test", 1,
+             seed=5, deterministic=False)
+    assert torch.equal(agent.generator.get_state(), before)
+
+
 def test_plot_writes_a_png(tmp_path):
     run = train(write_curriculum(tmp_path, total_steps=600), run_dir=tmp_path / "run", progress=False)
     assert main(["plot", str(run)]) == 0

@@ -1,4 +1,6 @@
-"""Deterministic evaluation of a policy on a stage of a task, goal by goal, in trials.
+"""Evaluation of a policy on a stage of a task, goal by goal, in trials: deterministic (the
+Gaussian's mean) by default, or sampled, since an RL² policy explores by sampling (Duan et al.
+meta-test their stochastic policy).
 
 A trial is K episodes on one goal from a fresh recurrent state (`RL2Trial`): K is the RL² agent's
 `trial_episodes`, or 1 for a memoryless PPO policy unless asked otherwise (K > 1 for PPO is the
@@ -86,9 +88,12 @@ def evaluate(
     sub_task: str | None = None,
     seed: int = 0,
     parallel: int = 4,
+    deterministic: bool = True,
 ) -> StageResult:
-    """Run `trials` deterministic trials of `stage` (one sub-task of a set, or all), each of
-    `trial_episodes` episodes (default: the agent's K, 1 for PPO) on one goal."""
+    """Run `trials` trials of `stage` (one sub-task of a set, or all), each of `trial_episodes`
+    episodes (default: the agent's K, 1 for PPO) on one goal. Sampled actions (`deterministic`
+    False) draw from the agent's generator reseeded with `seed`, and its state is restored
+    afterwards, so an evaluation during training leaves the training's random stream alone."""
     k = trial_episodes or agent.spec.trial_episodes
     rl2 = agent.spec.algo == "rl2"
     privileged = agent.privileged_dim > 0
@@ -111,8 +116,10 @@ def evaluate(
     for i in range(len(envs)):
         start(i)
     state = agent.initial_state(len(envs))
+    training_rng = agent.generator.get_state()
+    agent.generator.manual_seed(seed)
     while any(active):
-        actions, state = agent.act(obs, state, starts, deterministic=True)
+        actions, state = agent.act(obs, state, starts, deterministic=deterministic)
         starts[:] = False
         for i, env in enumerate(envs):
             if not active[i]:
@@ -126,6 +133,7 @@ def evaluate(
                     start(i)
                 else:
                     active[i] = False
+    agent.generator.set_state(training_rng)
     for env in envs:
         env.close()
     return result

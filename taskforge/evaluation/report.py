@@ -53,9 +53,11 @@ def evaluate_run(
     stages: list[str] | None = None,
     seed: int = 0,
     trial_episodes: int | None = None,
+    deterministic: bool = True,
 ) -> dict[str, Any]:
     """Evaluate a run: `trials` trials per (task, stage), trial k on goal k of the split, each of
-    `trial_episodes` episodes (default the agent's: K for RL², 1 for PPO)."""
+    `trial_episodes` episodes (default the agent's: K for RL², 1 for PPO), acting with the
+    policy's mean or (`deterministic` False) sampling from it."""
     checkpoint = find_checkpoint(path)
     agent, config, shapes = load_agent(checkpoint)
     k = trial_episodes or agent.spec.trial_episodes
@@ -66,7 +68,8 @@ def evaluate_run(
         sub_tasks = sub_task_names if len(sub_task_names) > 1 else [None]
         for stage in names:
             for sub in sub_tasks:
-                rows.append(evaluate(agent, task, phase["task_file"], stage, split, trials, k, sub_task=sub, seed=seed))
+                rows.append(evaluate(agent, task, phase["task_file"], stage, split, trials, k, sub_task=sub, seed=seed,
+                                     deterministic=deterministic))
     if stages and not rows:
         known = sorted({s for p in config["phases"] for s in p["stages"]})
         raise SpecError.single(checkpoint, "stage", f"none of {', '.join(stages)} is in this run; expected one of {', '.join(known)}")
@@ -77,6 +80,7 @@ def evaluate_run(
         "split": split,
         "trials_per_row": trials,
         "trial_episodes": k,
+        "actions": "mean" if deterministic else "sampled",
         "rows": [r.as_dict() for r in rows],
     }
 
@@ -98,7 +102,8 @@ def format_table(report: dict[str, Any]) -> str:
     lines = [cells(r) for r in report["rows"]]
     widths = [max(len(x) for x in col) for col in zip(header, *lines)]
     trials = f", trials of {k} episodes" if k > 1 else ""
-    out = [f"{report['checkpoint']} at step {report['step']:,}, {report['split']} split{trials}"]
+    sampled = ", sampled actions" if report.get("actions") == "sampled" else ""
+    out = [f"{report['checkpoint']} at step {report['step']:,}, {report['split']} split{trials}{sampled}"]
     out.append("  ".join(h.ljust(w) for h, w in zip(header, widths)))
     out.append("  ".join("-" * w for w in widths))
     out += ["  ".join(c.ljust(w) for c, w in zip(row, widths)) for row in lines]
