@@ -127,6 +127,9 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "taskforge.cli", "train", str(cur), "--run-dir", str(run), "--no-progress"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        # a shell starts background jobs (`make test &`) with SIGINT ignored, and Python then
+        # installs no Ctrl-C handler in the child: give it the terminal's default disposition
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.time() + 60
     while time.time() < deadline and len(read_jsonl(run / "metrics.jsonl")) < 3:
