@@ -23,13 +23,13 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import RESULTS, advance_run, print_table, write_result  # noqa: E402
+from taskforge.envs import load_curriculum  # noqa: E402
 from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
 from taskforge.training.metrics import read_jsonl  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {"curriculum": ROOT / "curricula/pick_place.yaml", "flat": ROOT / "benchmarks/configs/pick_place_flat.yaml"}
 RUNS = ROOT / "benchmarks/runs/pick_place"
-STAGES = ["reach", "push", "pick", "place"]
 
 
 def plot_curves(runs: dict[str, dict], out: Path) -> Path:
@@ -40,6 +40,7 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    stages = load_curriculum(VARIANTS["curriculum"]).phases[0].stages  # the y axis of the stage panel
     fig, (ax, ax_stage) = plt.subplots(2, 1, figsize=(8, 6), sharex=True, height_ratios=[3, 1.2])
     for colour, variant in zip(("tab:blue", "tab:orange"), VARIANTS):
         curves = [dict(r["eval_place_success"]) for r in runs.values() if r["variant"] == variant]
@@ -54,7 +55,7 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
             xs, ys = [0], [0]
             for step, stage in r["promotions"]:
                 xs.append(step)
-                ys.append(STAGES.index(stage))
+                ys.append(stages.index(stage))
             xs.append(r["steps_done"])
             ys.append(ys[-1])
             ax_stage.step(xs, ys, where="post", lw=1, label=f"seed {r['seed']}")
@@ -62,7 +63,7 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     ax.set_ylim(-0.02, 1.02)
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title("Meta-World pick-place without demos: curriculum vs flat (ML1 test goals)")
-    ax_stage.set_yticks(range(len(STAGES)), STAGES)
+    ax_stage.set_yticks(range(len(stages)), stages)
     ax_stage.set_ylabel("curriculum stage")
     ax_stage.set_xlabel("environment steps")
     ax_stage.legend(loc="lower right", fontsize=7)

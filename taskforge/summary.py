@@ -83,7 +83,7 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
         if cur.agent.algo == "rl2" and bptt is not None:
             # Trials start at chunk starts; episodes that run to their limit E then start at multiples
             # of E, which all fall on chunk starts when L divides E: no gradient ever crosses them.
-            aligned = sorted({n for n in phase.stages if (phase.task.stage(n).max_episode_steps or phase.task.max_episode_steps) % bptt == 0})
+            aligned = sorted({n for n in phase.stages if phase.task.episode_steps(phase.task.stage(n)) % bptt == 0})
             if aligned:
                 lines.append(f"    note: bptt_length {bptt} divides the episode length of {', '.join(aligned)}: every BPTT chunk "
                              "then lies inside one episode and RL² gets no gradient to carry what it learnt into the next "

@@ -198,7 +198,7 @@ def test_stochastic_eval_is_seeded_and_leaves_the_agents_random_stream_alone(tmp
 
     run = train(write_curriculum(tmp_path, total_steps=400), run_dir=tmp_path / "run", progress=False)
 
-    def returns(*args: str) -> list[float]:
+    def returns(*args: str) -> list[str | float]:  # [action mode, mean return]
         out = tmp_path / "report.json"
         assert main(["eval", str(run), "--episodes", "2", "--stage", "easy", "--out", str(out), *args]) == 0
         report = json.loads(out.read_text())

@@ -103,7 +103,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
 
     @property
     def max_episode_steps(self) -> int:
-        return self.stages[self.stage].spec.max_episode_steps or self.task.max_episode_steps
+        return self.task.episode_steps(self.stages[self.stage].spec)
 
     # -- gymnasium API ------------------------------------------------------------------------
 

@@ -448,6 +448,10 @@ class TaskSpec(StrictModel):
                 return stage
         raise KeyError(name)
 
+    def episode_steps(self, stage: StageSpec) -> int:
+        """The time limit of one of this task's stages: its own `max_episode_steps`, else the task's."""
+        return stage.max_episode_steps or self.max_episode_steps
+
     @property
     def stage_names(self) -> list[str]:
         return [s.name for s in self.stages]
