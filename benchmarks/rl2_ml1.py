@@ -3,7 +3,7 @@ several seeds, and the adaptation curve (success at episode 1..K of a trial on h
 of RL² next to a memoryless PPO baseline.
 
     python benchmarks/rl2_ml1.py [--variants rl2-reach ppo-reach rl2-push rl2-pick-place]
-                                 [--seeds 0 1 2] [--steps 1000000] [--chunk-steps 100000] [--trials 10]
+                                 [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
 
 The full budget takes many hours on 2 cores, so the script works in chunks (like
 pick_place_curriculum.py): each call advances every run by at most `--chunk-steps`, resuming
@@ -70,9 +70,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--steps", type=int, default=1_000_000)
-    parser.add_argument("--chunk-steps", type=int, default=100_000)
-    parser.add_argument("--trials", type=int, default=10, help="trials per split per evaluation (goal k for trial k)")
+    parser.add_argument("--steps", type=int, default=2_000_000)
+    parser.add_argument("--chunk-steps", type=int, default=500_000)
+    parser.add_argument("--trials", type=int, default=50, help="trials per split per evaluation (goal k for trial k)")
     parser.add_argument("--report-only", action="store_true", help="summarise the runs so far, train nothing")
     args = parser.parse_args()
 
