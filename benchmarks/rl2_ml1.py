@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import advance_run, print_table, write_result  # noqa: E402
+from benchmarks.common import RESULTS, advance_run, print_table, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
 from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
 from taskforge.training.metrics import read_jsonl  # noqa: E402
@@ -64,6 +64,46 @@ def meta_evaluate(run_dir: Path, step: int, trials: int) -> list[dict]:
             f.write(json.dumps(entry) + "\n")
         done.append(entry)
     return done
+
+
+def plot_curves(runs: dict[str, dict], out: Path) -> Path:
+    """Left: meta-test success at episode 1 (dashed) and episode K (solid) of a trial vs env steps,
+    mean over seeds. Right: the adaptation curve (success at episode 1..K on held-out goals) at
+    each variant's last evaluation that every one of its seeds reached."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, ax_adapt) = plt.subplots(1, 2, figsize=(11, 4), width_ratios=[3, 2])
+    for colour, variant in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"], VARIANTS):
+        seeds = [r for r in runs.values() if r["variant"] == variant]
+        tests = [{e["step"]: e["per_episode"] for e in r["evals"] if e["split"] == "test"} for r in seeds]
+        steps = sorted({s for t in tests for s in t})
+        if not steps:
+            continue
+        for k, style in ((0, "--"), (-1, "-")):
+            mean = [np.mean([t[s][k] for t in tests if s in t]) for s in steps]
+            label = f"{variant}, episode {1 if k == 0 else TRIAL_EPISODES} ({len(seeds)} seed{'s' * (len(seeds) > 1)})"
+            ax.plot(steps, mean, style, marker="o", color=colour, label=label)
+        common = [s for s in steps if all(s in t for t in tests)]
+        if common:
+            curve = np.mean([t[common[-1]] for t in tests], axis=0)
+            ax_adapt.plot(range(1, TRIAL_EPISODES + 1), curve, "o-", color=colour, label=f"{variant} at {common[-1]:,} steps")
+    ax.set_xlabel("environment steps")
+    ax.set_ylabel("meta-test success (held-out goals)")
+    ax.set_ylim(-0.02, 1.02)
+    ax.legend(fontsize=7)
+    ax.set_title("ML1, goal hidden: meta-test success vs steps")
+    ax_adapt.set_xticks(range(1, TRIAL_EPISODES + 1))
+    ax_adapt.set_xlabel("episode of the trial")
+    ax_adapt.set_ylim(-0.02, 1.02)
+    ax_adapt.legend(fontsize=7)
+    ax_adapt.set_title("adaptation curve (mean over seeds)")
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
 
 
 def main() -> None:
@@ -111,6 +151,7 @@ def main() -> None:
     missing = len(args.variants) * len(args.seeds) - len(runs)
     remaining = sum(max(0, args.steps - r["steps_done"]) for r in runs.values()) + missing * args.steps
     print(f"remaining: {remaining:,} env steps ({len(runs)} runs started, {missing} not started)")
+    print(f"curves: {plot_curves(runs, RESULTS / 'rl2_ml1.png')}")
     write_result("rl2_ml1", {"variants": args.variants, "seeds": args.seeds, "steps": args.steps, "trials": args.trials,
                              "trial_episodes": TRIAL_EPISODES, "runs": runs, "remaining_steps": remaining,
                              "complete": remaining == 0})
