@@ -152,14 +152,17 @@ def test_bad_stage_or_split_is_a_spec_error():
         taskforge.make(PICK_PLACE, split="validation")
 
 
-def test_scripted_pick_place_grasps_lifts_and_places(pick_place_doc):
+@pytest.mark.parametrize("object_start", ["goal_set", "random"])
+def test_scripted_pick_place_grasps_lifts_and_places(pick_place_doc, object_start):
     """Meta-World's own scripted policy, run through our env: `object_grasped` agrees with
-    Meta-World's contact test on every step, and pick then place success flip on."""
+    Meta-World's contact test on every step, and pick then place success flip on. With a random
+    object start this also checks Meta-World's internals moved with the object (its policy
+    reads the observation, its success flag its own state)."""
     from metaworld.policies.sawyer_pick_place_v3_policy import SawyerPickPlaceV3Policy
 
     doc = copy.deepcopy(pick_place_doc)
     doc["goals"]["observable"] = True  # the scripted policy reads the goal from the observation
-    doc.pop("randomization")
+    doc["randomization"] = {"object_start": object_start}
     env = env_from(doc, stage="place", seed=1)
     policy = SawyerPickPlaceV3Policy()
     pick = env.stages["pick"]
@@ -174,6 +177,61 @@ def test_scripted_pick_place_grasps_lifts_and_places(pick_place_doc):
             placed = True
             break
     assert picked and placed and info["native_success"] == 1.0
+
+
+OBJECT_START_TASKS = {
+    # task file: (object region low, high in x, y; minimum horizontal distance to the goal)
+    TASKS / "metaworld" / "reach.yaml": ((-0.1, 0.6), (0.1, 0.7), 0.15),
+    TASKS / "xarm7" / "pick_place.yaml": ((0.30, -0.25), (0.60, 0.25), 0.10),
+}
+
+
+@pytest.mark.parametrize("path", OBJECT_START_TASKS, ids=lambda p: f"{p.parent.name}/{p.stem}")
+def test_random_object_start_is_independent_of_the_goal_repeated_within_a_trial_and_seeded(path):
+    low, high, min_dist = OBJECT_START_TASKS[path]
+    doc = yaml.safe_load(path.read_text())
+    doc.pop("randomization", None)
+
+    def starts(object_start: str, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        doc["randomization"] = {"object_start": object_start}
+        env = env_from(doc, stage=doc["stages"][0]["name"], seed=seed)
+        out = []
+        for options in [{"goal_index": 3}, {"goal_index": 3}, {"same_task": True}, {"goal_index": 3}]:
+            obs, _ = env.reset(options=options)
+            f = env.features()
+            np.testing.assert_allclose(obs[4:7], f["object_pos"], atol=1e-3)  # observed where it is
+            out.append((f["object_pos"].copy(), f["goal_pos"].copy()))
+        env.close()
+        return out
+
+    fixed = starts("goal_set", 0)
+    assert all(np.allclose(o, fixed[0][0], atol=1e-3) for o, _ in fixed)
+
+    drawn = starts("random", 0)
+    objects = np.array([o for o, _ in drawn])
+    assert all(np.array_equal(g, fixed[0][1]) for _, g in drawn), "the goal stays the goal entry's"
+    assert np.linalg.norm(objects[0] - objects[1]) > 1e-3 and np.linalg.norm(objects[1] - objects[3]) > 1e-3
+    np.testing.assert_allclose(objects[2], objects[1], atol=1e-6)  # same_task repeats the start
+    assert np.all(objects[:, :2] >= np.array(low) - 0.005) and np.all(objects[:, :2] <= np.array(high) + 0.005)
+    assert np.all(np.linalg.norm(objects[:, :2] - fixed[0][1][:2], axis=1) >= min_dist - 0.005)
+    np.testing.assert_array_equal(objects, np.array([o for o, _ in starts("random", 0)]))
+    assert not np.allclose(objects, np.array([o for o, _ in starts("random", 1)]))
+
+
+def test_random_object_start_is_refused_where_there_is_no_object_to_place(tmp_path):
+    from taskforge import load_task
+
+    doc = yaml.safe_load((TASKS / "metaworld" / "reach.yaml").read_text())
+    doc["backend"] = {"type": "metaworld", "env": "door-open-v3"}
+    doc["randomization"] = {"object_start": "random"}
+    path = tmp_path / "door.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(SpecError, match=r"door\.yaml.*randomization\.object_start.*door-open-v3"):
+        load_task(path)
+    doc["randomization"] = {"object_start": "anywhere"}
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(SpecError, match=r"randomization\.object_start.*goal_set.*random"):
+        load_task(path)
 
 
 def test_ml1_goal_cache_on_disk_round_trips_and_survives_corruption(tmp_path, monkeypatch):

@@ -56,8 +56,17 @@ class Backend(Protocol):
     def num_goals(self, split: Split) -> int:
         ...
 
-    def reset(self, task_name: str, split: Split, goal_index: int, goal: GoalOverride) -> np.ndarray:
-        """Reset to a goal of a split; returns the observation with the true goal in `goal_slice`."""
+    def reset(
+        self, task_name: str, split: Split, goal_index: int, goal: GoalOverride,
+        object_rng: np.random.Generator | None = None,
+    ) -> np.ndarray:
+        """Reset to a goal of a split; returns the observation with the true goal in `goal_slice`.
+
+        `object_rng` None: the object starts where the goal entry puts it. A generator: the
+        object's start is drawn from it over the backend's object region, independently of the
+        goal (`randomization.object_start: random`); the env hands a generator seeded the same
+        way to repeat a placement. Backends without an object refuse that option in `check_task`.
+        """
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, bool]:
         """Apply one control step; returns the observation and whether the simulated episode

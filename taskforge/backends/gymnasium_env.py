@@ -50,7 +50,10 @@ class GymnasiumBackend:
     def num_goals(self, split: Split) -> int:
         return getattr(self._goals, split).count
 
-    def reset(self, task_name: str, split: Split, goal_index: int, goal: GoalOverride) -> np.ndarray:
+    def reset(
+        self, task_name: str, split: Split, goal_index: int, goal: GoalOverride,
+        object_rng: np.random.Generator | None = None,
+    ) -> np.ndarray:
         seed = goal_index + (TEST_SEED_OFFSET if split == "test" else 0)
         obs, _ = self._env.reset(seed=seed)
         self._reward = self._return = self._success = 0.0
@@ -87,6 +90,8 @@ def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
     probe.close()
     if task.randomization.physics:
         issues.append(SpecIssue(str(file), "randomization.physics", "physics randomisation needs a MuJoCo backend (metaworld); remove it for gymnasium envs"))
+    if task.randomization.object_start != "goal_set":
+        issues.append(SpecIssue(str(file), "randomization.object_start", "a Gymnasium env has no object to place; expected 'goal_set' (the default)"))
     return issues
 
 

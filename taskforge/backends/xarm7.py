@@ -72,7 +72,8 @@ Goals and reset
   generated from `goals.seed` (`xarm7_scene.make_goal_sets`); held-out test goals come from the
   other colour of a 3-D checkerboard over the goal region, at least 2 x `goal_split.margin` from
   every train goal. Reset: arm at `home` (gripper open), cube at the entry's start resting on
-  the table (its current, possibly randomised size), goal at the entry's goal moved by the
+  the table (its current, possibly randomised size; with `randomization.object_start: random`
+  drawn afresh over `object_region`, at least `min_goal_distance` from the goal), goal at the entry's goal moved by the
   stage's goal override (exactly as Meta-World's backend: `height: object` = the cube's rest
   height, `distance_scale` pulls it towards the cube horizontally), `settle_steps` physics
   steps; the TCP target starts at the measured TCP.
@@ -103,6 +104,7 @@ from taskforge.backends.xarm7_scene import (
     home_qpos,
     load_robot,
     make_goal_sets,
+    place_cubes,
     required_names,
     robot_path,
 )
@@ -209,9 +211,14 @@ class XArm7Backend:
 
     # -- episode ------------------------------------------------------------------------------
 
-    def reset(self, task_name: str, split: Split, goal_index: int, goal: GoalOverride) -> np.ndarray:
+    def reset(
+        self, task_name: str, split: Split, goal_index: int, goal: GoalOverride,
+        object_rng: np.random.Generator | None = None,
+    ) -> np.ndarray:
         m, d = self._model, self._data
         obj_xy, goal_pos = self.goal_entry(split, goal_index)
+        if object_rng is not None:
+            obj_xy = place_cubes(self.spec, goal_pos[None], object_rng)[0]
         mujoco.mj_resetData(m, d)
         d.qpos[self._arm_qadr] = self._home
         d.ctrl[self._arm_act] = self._home

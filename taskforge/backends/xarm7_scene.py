@@ -207,8 +207,6 @@ def _split(spec: XArm7BackendSpec, rng: np.random.Generator, parity: int, count:
     region, split = spec.goal_region, spec.goal_split
     low = np.array([region.x[0], region.y[0], region.z[0]])
     high = np.array([region.x[1], region.y[1], region.z[1]])
-    obj_low = np.array([spec.object_region.x[0], spec.object_region.y[0]])
-    obj_high = np.array([spec.object_region.x[1], spec.object_region.y[1]])
     margin = split.margin / split.cell
     goals, objects, total, chunks = [], [], 0, 0
     while total < count:
@@ -227,18 +225,25 @@ def _split(spec: XArm7BackendSpec, rng: np.random.Generator, parity: int, count:
                 f"could not draw {'train' if parity == 0 else 'test'} goals: the goal region has (almost) no "
                 f"checkerboard cell of that colour; enlarge goal_region or reduce goal_split.cell ({split.cell:g}) / margin"
             )
-        starts = rng.uniform(obj_low, obj_high, size=(len(chosen), 2))
-        for _ in range(1000):
-            bad = np.linalg.norm(starts - chosen[:, :2], axis=1) < spec.min_goal_distance
-            if not bad.any():
-                break
-            starts[bad] = rng.uniform(obj_low, obj_high, size=(int(bad.sum()), 2))
-        else:
-            raise GoalRegionTooSmall(
-                f"could not place the cube at least min_goal_distance ({spec.min_goal_distance:g} m) from some goals; "
-                "reduce min_goal_distance or enlarge object_region/goal_region"
-            )
         goals.append(chosen)
-        objects.append(starts)
+        objects.append(place_cubes(spec, chosen, rng))
         total += len(chosen)
     return GoalSet(np.concatenate(objects)[:count], np.concatenate(goals)[:count])
+
+
+def place_cubes(spec: XArm7BackendSpec, goals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Cube starts (x, y) for goals (n x >=2): uniform over `object_region`, redrawn until at
+    least `min_goal_distance` from their goal horizontally. Used for the goal sets and for
+    `randomization.object_start: random`."""
+    obj_low = np.array([spec.object_region.x[0], spec.object_region.y[0]])
+    obj_high = np.array([spec.object_region.x[1], spec.object_region.y[1]])
+    starts = rng.uniform(obj_low, obj_high, size=(len(goals), 2))
+    for _ in range(1000):
+        bad = np.linalg.norm(starts - goals[:, :2], axis=1) < spec.min_goal_distance
+        if not bad.any():
+            return starts
+        starts[bad] = rng.uniform(obj_low, obj_high, size=(int(bad.sum()), 2))
+    raise GoalRegionTooSmall(
+        f"could not place the cube at least min_goal_distance ({spec.min_goal_distance:g} m) from some goals; "
+        "reduce min_goal_distance or enlarge object_region/goal_region"
+    )

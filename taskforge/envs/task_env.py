@@ -3,7 +3,8 @@ the task's randomisation.
 
 Per step: clip action -> action noise -> latency -> backlash -> backend.step -> features -> success ->
 reward terms -> observation noise -> hide goal. Per reset: choose sub-task and goal from the
-env's seeded generator -> restore+draw physics -> reset noise/latency -> backend.reset.
+env's seeded generator -> restore+draw physics -> draw the object's start (if random) -> reset
+noise/latency -> backend.reset.
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     stage, the sub-task of a task set, or pins the goal for that episode (`replay` is only echoed
     back in `info`); this is how a curriculum drives vectorised workers without rebuilding them.
     `reset(options={"same_task": True})` starts another episode of the previous one's stage,
-    sub-task and goal with the same physics draw (noise processes restart): RL²'s trials.
+    sub-task and goal with the same physics draw and object start (noise processes restart):
+    RL²'s trials.
 
     A vectorised trainer cannot pass options through autoreset, so it sets `next_episode`
     (e.g. with `VectorEnv.set_attr`) to the options the *next* reset without options should use.
@@ -79,6 +81,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._latency = ActionLatency(rand.action_latency, n_act)
         self._backlash = ActionBacklash(rand.action_backlash, n_act)
         self._hide_goal = not task.goals.observable
+        self._random_object = rand.object_start == "random"
+        self._object_seed = 0
 
         self.action_space = Box(-1.0, 1.0, (n_act,), np.float32)
         self.observation_space = Box(-np.inf, np.inf, (self.backend.obs_size,), np.float32)
@@ -132,6 +136,10 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             physics_draw = self._physics_draw
         else:
             physics_draw = randomizer.apply(rng) if randomizer else np.zeros(0)
+            if self._random_object:
+                # A seed, not a position: the backend owns its object region and the minimum
+                # distance to the goal; `same_task` hands it the same seed to repeat the start.
+                self._object_seed = int(rng.integers(2**63))
         self._obs_noise.reset(rng)
         self._act_noise.reset(rng)
         self._latency.reset(rng)
@@ -139,7 +147,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
 
         stage = self.stages[self.stage]
         goal = GoalOverride(stage.spec.goal.height, stage.spec.goal.distance_scale)
-        obs = self.backend.reset(name, self.split, goal_index, goal)
+        object_rng = np.random.default_rng(self._object_seed) if self._random_object else None
+        obs = self.backend.reset(name, self.split, goal_index, goal, object_rng)
         self._t = 0
         # `replay` is the curriculum's label for the episode, echoed back so a trainer can tell
         # which finished episodes were replays without tracking autoresets itself.

@@ -396,6 +396,14 @@ class RandomizationSpec(StrictModel):
     """Width of a backlash-like dead band on each action dimension (action units), drawn once per
     episode: the applied command only moves once the requested one has moved more than half the
     width away from it, as with play in a gearbox. Negative draws count as 0."""
+    object_start: Literal["goal_set", "random"] = "goal_set"
+    """Where the object starts. `goal_set`: where the goal entry puts it (ML1 draws one object
+    placement with each goal, so the object's start is fixed per goal: an agent that sees the
+    object can tell the goal from it). `random`: drawn afresh for each new task instance (each
+    episode; under RL², each trial, whose episodes repeat it), uniformly over the backend's object
+    region and independently of the goal, at least the backend's minimum distance from the goal
+    horizontally. Needed wherever the goal is hidden and the object is observed (meta-RL on
+    Meta-World), or the object names the goal."""
 
 
 # --- goals ---------------------------------------------------------------------------------
