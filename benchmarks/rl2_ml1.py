@@ -93,7 +93,7 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     ax.set_xlabel("environment steps")
     ax.set_ylabel("meta-test success (held-out goals)")
     ax.set_ylim(-0.02, 1.02)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, handlelength=4)  # long enough handles to show episode 1's dashes
     ax.set_title("ML1, goal hidden: meta-test success vs steps")
     ax_adapt.set_xticks(range(1, TRIAL_EPISODES + 1))
     ax_adapt.set_xlabel("episode of the trial")
