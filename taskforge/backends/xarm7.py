@@ -73,10 +73,10 @@ Goals and reset
   other colour of a 3-D checkerboard over the goal region, at least 2 x `goal_split.margin` from
   every train goal. Reset: arm at `home` (gripper open), cube at the entry's start resting on
   the table (its current, possibly randomised size; with `randomization.object_start: random`
-  drawn afresh over `object_region`, at least `min_goal_distance` from the goal), goal at the entry's goal moved by the
-  stage's goal override (exactly as Meta-World's backend: `height: object` = the cube's rest
-  height, `distance_scale` pulls it towards the cube horizontally), `settle_steps` physics
-  steps; the TCP target starts at the measured TCP.
+  drawn afresh over `object_region`, at least `min_goal_distance` from the goal), goal at the
+  entry's goal moved by the stage's goal override (exactly as Meta-World's backend:
+  `height: object` = the cube's rest height, `distance_scale` pulls it towards the cube
+  horizontally), `settle_steps` physics steps; the TCP target starts at the measured TCP.
 """
 
 from __future__ import annotations
