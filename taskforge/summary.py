@@ -52,6 +52,8 @@ def task_summary(task: TaskSpec) -> list[str]:
         lines.append(f"  action latency: {lat.min_steps}..{lat.max_steps} steps")
     if rand.action_backlash is not None:
         lines.append(f"  action backlash width: {rand.action_backlash.describe()}")
+    if rand.object_start == "random":
+        lines.append("  object start: random per task instance, independent of the goal")
     return lines
 
 

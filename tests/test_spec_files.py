@@ -29,6 +29,9 @@ def test_pick_place_summary_names_every_stage_term_and_range(capsys, monkeypatch
                  "+1*tcp_to_object", "object_to_goal_distance < 0.07", "body_mass: scale by uniform[0.5, 1.5]",
                  "dof_damping: scale by loguniform[0.3, 3]", "gravity: add by N(0, 0.4)", "goals hidden", "test (held out) 50"):
         assert text in out, text
+    assert "object start" not in out  # ML1's own placement: nothing to say
+    assert main(["validate", "tasks/metaworld/reach.yaml"]) == 0
+    assert "object start: random per task instance" in capsys.readouterr().out
 
 
 def test_tasks_lists_shipped_tasks_with_stages(capsys, monkeypatch):
