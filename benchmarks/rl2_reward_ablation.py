@@ -15,7 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -48,12 +48,9 @@ def main() -> None:
     args = parser.parse_args()
 
     rows, results = [], {}
-    for name in ("as trained", "reward input = 0"):
-        if name == "as trained":
+    for name, ablation in (("as trained", nullcontext()), ("reward input = 0", reward_input_blanked())):
+        with ablation:
             report = evaluate_run(args.run, split=args.split, trials=args.trials)
-        else:
-            with reward_input_blanked():
-                report = evaluate_run(args.run, split=args.split, trials=args.trials)
         row = report["rows"][0]
         per_episode = [e["success_rate"] for e in row["per_episode"]]
         results[name] = {"success_rate": row["success_rate"], "per_episode": per_episode, "step": report["step"]}

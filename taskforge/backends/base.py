@@ -30,6 +30,22 @@ class GoalOverride:
         return self.height == "keep" and self.distance_scale == 1.0
 
 
+def draw_starts_apart(
+    low: np.ndarray, high: np.ndarray, goals: np.ndarray, min_distance: float, rng: np.random.Generator
+) -> np.ndarray | None:
+    """Object starts uniform over [low, high] (one row per goal, as many columns as `low`),
+    each start redrawn until at least `min_distance` from its goal horizontally (x, y). None
+    when 1000 redraws leave some start too close (the regions cannot satisfy the distance).
+    One sampler for every backend's object placement, so all keep the same rule."""
+    starts = rng.uniform(low, high, size=(len(goals), len(low)))
+    for _ in range(1000):
+        bad = np.linalg.norm(starts[:, :2] - goals[:, :2], axis=1) < min_distance
+        if not bad.any():
+            return starts
+        starts[bad] = rng.uniform(low, high, size=(int(bad.sum()), len(low)))
+    return None
+
+
 class Backend(Protocol):
     provides: frozenset[str]
     """Feature names this backend fills (checked against what a task's terms read)."""

@@ -29,7 +29,7 @@ from metaworld.env_dict import ALL_V3_ENVIRONMENTS, MT10_V3
 from metaworld.types import Task
 
 from taskforge.atomic import atomic_write
-from taskforge.backends.base import GoalOverride, Split
+from taskforge.backends.base import GoalOverride, Split, draw_starts_apart
 from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
 from taskforge.spec.task import GoalsSpec, MetaWorldBackendSpec
 from taskforge.terms import ENV_FEATURES, FEATURES, Features
@@ -263,10 +263,9 @@ def _draw_object_start(env: metaworld.SawyerXYZEnv, goal: np.ndarray, rng: np.ra
     task-vector space), redrawn until `_MIN_OBJECT_GOAL_XY` from the goal horizontally."""
     space = env._random_reset_space
     low, high = space.low[:3], space.high[:3]
-    for _ in range(1000):
-        start = rng.uniform(low, high)
-        if math.dist(start[:2].tolist(), goal[:2].tolist()) >= _MIN_OBJECT_GOAL_XY:
-            return start
+    starts = draw_starts_apart(low, high, goal[None], _MIN_OBJECT_GOAL_XY, rng)
+    if starts is not None:
+        return starts[0]
     raise RuntimeError(f"no object start in [{low}, {high}] is {_MIN_OBJECT_GOAL_XY} m from the goal {goal}")
 
 

@@ -17,6 +17,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from taskforge.backends.base import draw_starts_apart
 from taskforge.spec.task import XArm7BackendSpec
 
 # The repository's tasks/ folder, beside the taskforge package (a source checkout or an editable
@@ -237,12 +238,9 @@ def place_cubes(spec: XArm7BackendSpec, goals: np.ndarray, rng: np.random.Genera
     `randomization.object_start: random`."""
     obj_low = np.array([spec.object_region.x[0], spec.object_region.y[0]])
     obj_high = np.array([spec.object_region.x[1], spec.object_region.y[1]])
-    starts = rng.uniform(obj_low, obj_high, size=(len(goals), 2))
-    for _ in range(1000):
-        bad = np.linalg.norm(starts - goals[:, :2], axis=1) < spec.min_goal_distance
-        if not bad.any():
-            return starts
-        starts[bad] = rng.uniform(obj_low, obj_high, size=(int(bad.sum()), 2))
+    starts = draw_starts_apart(obj_low, obj_high, goals, spec.min_goal_distance, rng)
+    if starts is not None:
+        return starts
     raise GoalRegionTooSmall(
         f"could not place the cube at least min_goal_distance ({spec.min_goal_distance:g} m) from some goals; "
         "reduce min_goal_distance or enlarge object_region/goal_region"
