@@ -23,7 +23,7 @@ def _kind_of(path: Path) -> str:
     data = read_yaml(path)
     if "phases" in data:
         return "curriculum"
-    if "stages" in data or "backend" in data:
+    if {"stages", "backend", "base"} & data.keys():
         return "task"
     if {"ppo", "policy", "algo", "rl2"} & data.keys():
         return "agent"
@@ -68,7 +68,7 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     root = Path(args.dir)
     if not root.is_dir():
         raise SpecError.single(root, "", "no such directory; expected the folder of task files (e.g. tasks/)")
-    files = sorted(p for p in root.rglob("*.yaml") if "stages" in read_yaml(p))
+    files = sorted(p for p in root.rglob("*.yaml") if {"stages", "base"} & read_yaml(p).keys())
     for path in files:
         task = load_task_spec(path)
         source = task.backend.describe()

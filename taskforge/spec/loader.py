@@ -49,8 +49,61 @@ def validate(model: type[M], data: dict[str, Any], file: str | Path) -> M:
         raise SpecError(issues) from None
 
 
+# Fields of a task file that hold paths (relative to the file that writes them).
+_TASK_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("backend", "robot_model"),)
+
+
+def read_task_yaml(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
+    """A task file's mapping merged over the task file its `base:` names (bases may have bases).
+
+    Why: a task variant (a bigger cube, a lower table, the object drawn per trial) differs from
+    its task in a field or two. Writing only those keeps the variant in step with its base
+    instead of a copy that drifts. Mappings merge key by key; anything else the variant writes
+    (a list such as `stages`, a number, null) replaces the base's value whole, so a variant
+    that changes one stage restates the `stages` list. Paths in the base stay relative to it.
+    """
+    path = Path(path)
+    data = read_yaml(path)
+    if "base" not in data:
+        return data
+    ref = data.pop("base")
+    if not isinstance(ref, str) or not ref.strip():
+        raise SpecError.single(path, "base", f"expected the path of a task file, relative to this one (got {ref!r})")
+    base_path = resolve_relative(path, ref)
+    chain = (*_chain, path.resolve())
+    if base_path.resolve() in chain:
+        raise SpecError.single(path, "base", f"'{ref}' leads back to this file; expected a chain of bases that ends")
+    if not base_path.is_file():
+        raise SpecError.single(path, "base", f"no such file {base_path}; expected a task file, relative to this one")
+    base = read_task_yaml(base_path, chain)
+    for field in _TASK_PATH_FIELDS:
+        _rebase_path(base, field, base_path, path)
+    return _merge(base, data)
+
+
+def _rebase_path(data: dict[str, Any], field: tuple[str, ...], old_file: Path, new_file: Path) -> None:
+    """Rewrite a relative path at `field` so that it names the same file from `new_file`'s folder."""
+    *parents, key = field
+    for part in parents:
+        data = data.get(part)
+        if not isinstance(data, dict):
+            return
+    value = data.get(key)
+    if isinstance(value, str) and not Path(value).is_absolute():
+        data[key] = os.path.relpath(resolve_relative(old_file, value), new_file.parent)
+
+
+def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """`override` over `base`: mappings merge recursively, any other value replaces."""
+    merged = dict(base)
+    for key, value in override.items():
+        both_maps = isinstance(value, dict) and isinstance(base.get(key), dict)
+        merged[key] = _merge(base[key], value) if both_maps else value
+    return merged
+
+
 def load_task_spec(path: str | Path) -> TaskSpec:
-    return validate(TaskSpec, read_yaml(path), path)
+    return validate(TaskSpec, read_task_yaml(path), path)
 
 
 def load_agent_spec(path: str | Path) -> AgentSpec:
