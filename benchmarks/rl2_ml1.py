@@ -40,6 +40,7 @@ from taskforge.training.metrics import read_jsonl  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {
     "rl2-reach": ROOT / "curricula/ml1_reach_rl2.yaml",
+    "rl2-reach-whole-trial": ROOT / "benchmarks/configs/ml1_reach_rl2_whole_trial.yaml",
     "ppo-reach": ROOT / "benchmarks/configs/ml1_reach_ppo.yaml",
     "rl2-push": ROOT / "benchmarks/configs/ml1_push_rl2.yaml",
     "rl2-pick-place": ROOT / "benchmarks/configs/ml1_pick_place_rl2.yaml",

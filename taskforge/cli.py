@@ -13,17 +13,18 @@ from pathlib import Path
 
 import numpy as np
 
-from taskforge.spec import SpecError, SpecIssue, expected_one_of, read_yaml
+from taskforge.spec import SpecError, SpecIssue, expected_one_of, read_yaml_with_base
 
 EXIT_USAGE = 2
 
 
 def _kind_of(path: Path) -> str:
-    """Task, agent or curriculum, from the top-level keys (falling back to the folder name)."""
-    data = read_yaml(path)
+    """Task, agent or curriculum, from the top-level keys (a variant's merged with its base's;
+    falling back to the folder name)."""
+    data = read_yaml_with_base(path)
     if "phases" in data:
         return "curriculum"
-    if {"stages", "backend", "base"} & data.keys():
+    if {"stages", "backend"} & data.keys():
         return "task"
     if {"ppo", "policy", "algo", "rl2"} & data.keys():
         return "agent"
@@ -68,7 +69,7 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     root = Path(args.dir)
     if not root.is_dir():
         raise SpecError.single(root, "", "no such directory; expected the folder of task files (e.g. tasks/)")
-    files = sorted(p for p in root.rglob("*.yaml") if {"stages", "base"} & read_yaml(p).keys())
+    files = sorted(p for p in root.rglob("*.yaml") if "stages" in read_yaml_with_base(p))
     for path in files:
         task = load_task_spec(path)
         source = task.backend.describe()

@@ -1,5 +1,5 @@
-"""Task variants written as `base:` + the fields that differ: merged like the full file would be,
-paths kept pointing at the same files, and a bad `base:` is one clear line."""
+"""Task and agent variants written as `base:` + the fields that differ: merged like the full
+file would be, paths kept pointing at the same files, and a bad `base:` is one clear line."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 import yaml
 
 from taskforge.cli import main
-from taskforge.spec import SpecError, load_task_spec, read_task_yaml
+from taskforge.spec import SpecError, load_agent_spec, load_task_spec, read_task_yaml
 from tests.conftest import PICK_PLACE, ROOT
 
 XARM = ROOT / "tasks/xarm7"
@@ -90,7 +90,7 @@ def test_meta_pick_place_is_pick_place_with_the_puck_drawn_per_trial():
 
 @pytest.mark.parametrize("base_value,fragment", [
     ("missing.yaml", "base: no such file"),
-    (3, "base: expected the path of a task file"),
+    (3, "base: expected the path of a file of the same kind"),
     ("variant.yaml", "base: 'variant.yaml' leads back to this file"),
 ])
 def test_bad_base_is_one_line(base_value, fragment, tmp_path, capsys):
@@ -113,3 +113,18 @@ def test_a_mistake_in_the_variant_names_the_variant(tmp_path, capsys):
     assert main(["validate", str(variant)]) == 2
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"error: {variant}: max_episode_steps: ")
+
+
+def test_agent_preset_variant(tmp_path, capsys):
+    variant = _write(tmp_path / "agents/long_bptt.yaml", {
+        "base": str(ROOT / "agents/rl2.yaml"), "name": "long-bptt",
+        "ppo": {"rollout_steps": 1000, "bptt_length": 1000, "num_minibatches": 4},
+    })
+    base = load_agent_spec(ROOT / "agents/rl2.yaml")
+    spec = load_agent_spec(variant)
+    assert (spec.ppo.rollout_steps, spec.ppo.bptt_length, spec.ppo.num_minibatches) == (1000, 1000, 4)
+    assert spec.ppo.model_copy(update={"rollout_steps": base.ppo.rollout_steps, "bptt_length": base.ppo.bptt_length,
+                                       "num_minibatches": base.ppo.num_minibatches}) == base.ppo
+    assert (spec.policy, spec.rl2, spec.algo) == (base.policy, base.rl2, base.algo)
+    assert main(["validate", str(variant)]) == 0  # recognised as an agent preset through its base
+    assert "agent long-bptt: rl2" in capsys.readouterr().out

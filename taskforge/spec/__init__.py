@@ -13,6 +13,7 @@ from taskforge.spec.loader import (
     load_task_spec,
     read_task_yaml,
     read_yaml,
+    read_yaml_with_base,
     resolve_relative,
     validate,
 )
@@ -53,6 +54,7 @@ __all__ = [
     "load_task_spec",
     "read_task_yaml",
     "read_yaml",
+    "read_yaml_with_base",
     "resolve_relative",
     "validate",
 ]

@@ -53,14 +53,17 @@ def validate(model: type[M], data: dict[str, Any], file: str | Path) -> M:
 _TASK_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("backend", "robot_model"),)
 
 
-def read_task_yaml(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str, Any]:
-    """A task file's mapping merged over the task file its `base:` names (bases may have bases).
+def read_yaml_with_base(
+    path: str | Path, path_fields: tuple[tuple[str, ...], ...] = (), _chain: tuple[Path, ...] = ()
+) -> dict[str, Any]:
+    """A task or agent file's mapping merged over the file its `base:` names (bases may have bases).
 
-    Why: a task variant (a bigger cube, a lower table, the object drawn per trial) differs from
-    its task in a field or two. Writing only those keeps the variant in step with its base
+    Why: a variant (a bigger cube, the object drawn per trial, an agent with longer BPTT) differs
+    from its base in a field or two. Writing only those keeps the variant in step with its base
     instead of a copy that drifts. Mappings merge key by key; anything else the variant writes
     (a list such as `stages`, a number, null) replaces the base's value whole, so a variant
-    that changes one stage restates the `stages` list. Paths in the base stay relative to it.
+    that changes one stage restates the `stages` list. Paths at `path_fields` in the base are
+    rewritten to name the same files from the variant's folder.
     """
     path = Path(path)
     data = read_yaml(path)
@@ -68,17 +71,22 @@ def read_task_yaml(path: str | Path, _chain: tuple[Path, ...] = ()) -> dict[str,
         return data
     ref = data.pop("base")
     if not isinstance(ref, str) or not ref.strip():
-        raise SpecError.single(path, "base", f"expected the path of a task file, relative to this one (got {ref!r})")
+        raise SpecError.single(path, "base", f"expected the path of a file of the same kind, relative to this one (got {ref!r})")
     base_path = resolve_relative(path, ref)
     chain = (*_chain, path.resolve())
     if base_path.resolve() in chain:
         raise SpecError.single(path, "base", f"'{ref}' leads back to this file; expected a chain of bases that ends")
     if not base_path.is_file():
-        raise SpecError.single(path, "base", f"no such file {base_path}; expected a task file, relative to this one")
-    base = read_task_yaml(base_path, chain)
-    for field in _TASK_PATH_FIELDS:
+        raise SpecError.single(path, "base", f"no such file {base_path}; expected a file of the same kind, relative to this one")
+    base = read_yaml_with_base(base_path, path_fields, chain)
+    for field in path_fields:
         _rebase_path(base, field, base_path, path)
     return _merge(base, data)
+
+
+def read_task_yaml(path: str | Path) -> dict[str, Any]:
+    """A task file's mapping with its `base:` chain merged in (see `read_yaml_with_base`)."""
+    return read_yaml_with_base(path, _TASK_PATH_FIELDS)
 
 
 def _rebase_path(data: dict[str, Any], field: tuple[str, ...], old_file: Path, new_file: Path) -> None:
@@ -107,7 +115,7 @@ def load_task_spec(path: str | Path) -> TaskSpec:
 
 
 def load_agent_spec(path: str | Path) -> AgentSpec:
-    return validate(AgentSpec, read_yaml(path), path)
+    return validate(AgentSpec, read_yaml_with_base(path), path)
 
 
 def load_curriculum_spec(path: str | Path) -> CurriculumSpec:
