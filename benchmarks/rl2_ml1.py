@@ -67,6 +67,27 @@ def meta_evaluate(run_dir: Path, step: int, trials: int) -> list[dict]:
     return done
 
 
+def evaluation_points(seeds: list[dict]) -> list[dict]:
+    """The k-th evaluation of every seed of one variant, for k = 0, 1, ...
+
+    Why by index and not by step: chunks end on a rollout boundary, and a run paused off the
+    500k grid (seed 2 of rl2-reach stopped at 585,600 once) evaluates a rollout or more away from
+    its siblings, so their exact step counts differ. Each point has the seeds' `steps` and, per
+    split, each seed's success per episode of the trial."""
+    per_seed = []
+    for run in seeds:
+        by_step: dict[int, dict[str, list[float]]] = {}
+        for e in run["evals"]:
+            by_step.setdefault(e["step"], {})[e["split"]] = e["per_episode"]
+        per_seed.append([(step, splits) for step, splits in sorted(by_step.items()) if len(splits) == 2])
+    points = []
+    for k in range(max((len(p) for p in per_seed), default=0)):
+        reached = [p[k] for p in per_seed if len(p) > k]
+        points.append({"steps": [step for step, _ in reached],
+                       **{split: [splits[split] for _, splits in reached] for split in ("train", "test")}})
+    return points
+
+
 def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     """Left: meta-test success at episode 1 (dashed) and episode K (solid) of a trial vs env steps,
     mean over seeds. Right: the adaptation curve (success at episode 1..K on held-out goals) at
@@ -79,18 +100,19 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     fig, (ax, ax_adapt) = plt.subplots(1, 2, figsize=(11, 4), width_ratios=[3, 2])
     for colour, variant in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"], VARIANTS):
         seeds = [r for r in runs.values() if r["variant"] == variant]
-        tests = [{e["step"]: e["per_episode"] for e in r["evals"] if e["split"] == "test"} for r in seeds]
-        steps = sorted({s for t in tests for s in t})
-        if not steps:
+        points = evaluation_points(seeds)
+        if not points:
             continue
+        steps = [np.mean(p["steps"]) for p in points]
         for k, style in ((0, "--"), (-1, "-")):
-            mean = [np.mean([t[s][k] for t in tests if s in t]) for s in steps]
+            mean = [np.mean([curve[k] for curve in p["test"]]) for p in points]
             label = f"{variant}, episode {1 if k == 0 else TRIAL_EPISODES} ({len(seeds)} seed{'s' * (len(seeds) > 1)})"
             ax.plot(steps, mean, style, marker="o", color=colour, label=label)
-        common = [s for s in steps if all(s in t for t in tests)]
-        if common:
-            curve = np.mean([t[common[-1]] for t in tests], axis=0)
-            ax_adapt.plot(range(1, TRIAL_EPISODES + 1), curve, "o-", color=colour, label=f"{variant} at {common[-1]:,} steps")
+        complete = [p for p in points if len(p["steps"]) == len(seeds)]
+        if complete:
+            curve = np.mean(complete[-1]["test"], axis=0)
+            at = f"{int(np.mean(complete[-1]['steps'])):,}"
+            ax_adapt.plot(range(1, TRIAL_EPISODES + 1), curve, "o-", color=colour, label=f"{variant} at ~{at} steps")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("meta-test success (held-out goals)")
     ax.set_ylim(-0.02, 1.02)
@@ -139,14 +161,12 @@ def main() -> None:
 
     rows = []
     for variant in args.variants:
-        evals = [e for r in runs.values() if r["variant"] == variant for e in r["evals"]]
-        for step in sorted({e["step"] for e in evals}):
-            cell = {}
-            for split in ("train", "test"):
-                at = [e for e in evals if e["step"] == step and e["split"] == split]
-                cell[split] = (np.mean([e["per_episode"][0] for e in at]), np.mean([e["per_episode"][-1] for e in at]), len(at))
-            rows.append([variant, f"{step:,}", cell["train"][2],
-                         f"{cell['train'][0]:.2f} -> {cell['train'][1]:.2f}", f"{cell['test'][0]:.2f} -> {cell['test'][1]:.2f}"])
+        for point in evaluation_points([r for r in runs.values() if r["variant"] == variant]):
+            low, high = min(point["steps"]), max(point["steps"])
+            cell = {split: f"{np.mean([c[0] for c in point[split]]):.2f} -> {np.mean([c[-1] for c in point[split]]):.2f}"
+                    for split in ("train", "test")}
+            rows.append([variant, f"{low:,}" if low == high else f"{low:,}-{high:,}", len(point["steps"]),
+                         cell["train"], cell["test"]])
     print_table(["variant", "env steps", "seeds", f"meta-train success ep 1 -> {TRIAL_EPISODES}",
                  f"meta-test success ep 1 -> {TRIAL_EPISODES}"], rows)
     missing = len(args.variants) * len(args.seeds) - len(runs)
