@@ -2,15 +2,17 @@
 several seeds, and the adaptation curve (success at episode 1..K of a trial on held-out goals)
 of RL² next to a memoryless PPO baseline.
 
-    python benchmarks/rl2_ml1.py [--variants rl2-reach ppo-reach rl2-push rl2-pick-place]
+    python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial ppo-reach rl2-push rl2-pick-place]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
 
 The full budget takes many hours on 2 cores, so the script works in chunks (like
 pick_place_curriculum.py): each call advances every run by at most `--chunk-steps`, resuming
 from its checkpoint, then evaluates the checkpoint on `--trials` trials of the ML1 train goals
 (meta-train) and of the 50 held-out goals (meta-test), each trial K = 5 episodes from a fresh
-hidden state (the PPO baseline plays the same trials; it cannot adapt, so its curve is flat).
-Evaluations are kept in each run's `meta_evals.jsonl`; the table and JSON are rebuilt from
+hidden state (the PPO baseline plays the same trials; it cannot adapt, so its curve is flat),
+once acting with the policy's mean and once sampling from it (as Duan et al.'s meta-test; an RL²
+policy's first-episode search may live in its sampling noise). A finished run given again gets
+any evaluation it lacks. Evaluations are kept in each run's `meta_evals.jsonl`; the table and JSON are rebuilt from
 them, so run it again to continue.
 
 Reference: the Meta-World paper (Yu et al., CoRL 2019; arXiv 1910.10897) reports ML1 only as
@@ -49,16 +51,22 @@ RUNS = ROOT / "benchmarks/runs/rl2"
 TRIAL_EPISODES = 5  # agents/rl2.yaml's K; the PPO baseline is evaluated over the same trials
 
 
-def meta_evaluate(run_dir: Path, step: int, trials: int) -> list[dict]:
-    """Meta-train and meta-test evaluation of the run's checkpoint at `step`, cached per step."""
+def meta_evaluate(run_dir: Path, step: int, trials: int, sampled: bool) -> list[dict]:
+    """Meta-train and meta-test evaluation of the run's checkpoint at `step`, cached per step.
+
+    `sampled`: act by sampling from the policy instead of taking its mean. An RL² policy's
+    exploration in a trial's first episodes is its sampling noise as much as its mean (Duan et
+    al. and garage meta-test with sampled actions), so the mean alone may hide adaptation.
+    Cache entries written before this option had no `sampled` key: they are mean-action ones."""
     cache = run_dir / "meta_evals.jsonl"
-    done = [e for e in read_jsonl(cache) if e["step"] == step and e["trials"] == trials]
+    done = [e for e in read_jsonl(cache) if e["step"] == step and e["trials"] == trials and e.get("sampled", False) == sampled]
     for split in ("train", "test"):
         if any(e["split"] == split for e in done):
             continue
-        report = evaluate_run(run_dir / "checkpoint.pt", split=split, trials=trials, trial_episodes=TRIAL_EPISODES)
+        report = evaluate_run(run_dir / "checkpoint.pt", split=split, trials=trials, trial_episodes=TRIAL_EPISODES,
+                              deterministic=not sampled)
         row = report["rows"][0]
-        entry = {"step": step, "split": split, "trials": trials, "success_rate": row["success_rate"],
+        entry = {"step": step, "split": split, "trials": trials, "sampled": sampled, "success_rate": row["success_rate"],
                  "per_episode": [e["success_rate"] for e in row["per_episode"]],
                  "per_episode_return": [e["mean_return"] for e in row["per_episode"]]}
         with cache.open("a") as f:
@@ -67,24 +75,28 @@ def meta_evaluate(run_dir: Path, step: int, trials: int) -> list[dict]:
     return done
 
 
+SPLITS = ("train", "test", "train_sampled", "test_sampled")  # mean-action and sampled-action evaluations
+
+
 def evaluation_points(seeds: list[dict]) -> list[dict]:
     """The k-th evaluation of every seed of one variant, for k = 0, 1, ...
 
     Why by index and not by step: chunks end on a rollout boundary, and a run paused off the
     500k grid (seed 2 of rl2-reach stopped at 585,600 once) evaluates a rollout or more away from
     its siblings, so their exact step counts differ. Each point has the seeds' `steps` and, per
-    split, each seed's success per episode of the trial."""
+    key of SPLITS, the success per episode of the trial of each seed that has it (sampled-action
+    evaluations came later and exist only at some points)."""
     per_seed = []
     for run in seeds:
         by_step: dict[int, dict[str, list[float]]] = {}
         for e in run["evals"]:
-            by_step.setdefault(e["step"], {})[e["split"]] = e["per_episode"]
-        per_seed.append([(step, splits) for step, splits in sorted(by_step.items()) if len(splits) == 2])
+            by_step.setdefault(e["step"], {})[e["split"] + ("_sampled" if e.get("sampled") else "")] = e["per_episode"]
+        per_seed.append([(step, evals) for step, evals in sorted(by_step.items()) if {"train", "test"} <= evals.keys()])
     points = []
     for k in range(max((len(p) for p in per_seed), default=0)):
         reached = [p[k] for p in per_seed if len(p) > k]
         points.append({"steps": [step for step, _ in reached],
-                       **{split: [splits[split] for _, splits in reached] for split in ("train", "test")}})
+                       **{key: [evals[key] for _, evals in reached if key in evals] for key in SPLITS}})
     return points
 
 
@@ -147,7 +159,8 @@ def main() -> None:
             if not args.report_only:
                 start = time.perf_counter()
                 step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
-                meta_evaluate(run_dir, step, args.trials)
+                for sampled in (False, True):  # a finished run gets any evaluation it lacks
+                    meta_evaluate(run_dir, step, args.trials, sampled)
                 print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
             if not ckpt.exists():
                 continue
@@ -163,12 +176,13 @@ def main() -> None:
     for variant in args.variants:
         for point in evaluation_points([r for r in runs.values() if r["variant"] == variant]):
             low, high = min(point["steps"]), max(point["steps"])
-            cell = {split: f"{np.mean([c[0] for c in point[split]]):.2f} -> {np.mean([c[-1] for c in point[split]]):.2f}"
-                    for split in ("train", "test")}
+            cell = {key: f"{np.mean([c[0] for c in point[key]]):.2f} -> {np.mean([c[-1] for c in point[key]]):.2f}"
+                    + (f" ({len(point[key])})" if key.endswith("sampled") else "") if point[key] else "-" for key in SPLITS}
             rows.append([variant, f"{low:,}" if low == high else f"{low:,}-{high:,}", len(point["steps"]),
-                         cell["train"], cell["test"]])
-    print_table(["variant", "env steps", "seeds", f"meta-train success ep 1 -> {TRIAL_EPISODES}",
-                 f"meta-test success ep 1 -> {TRIAL_EPISODES}"], rows)
+                         *(cell[key] for key in SPLITS)])
+    episodes = f"ep 1 -> {TRIAL_EPISODES}"
+    print_table(["variant", "env steps", "seeds", f"meta-train {episodes}", f"meta-test {episodes}",
+                 f"sampled: meta-train {episodes} (seeds)", f"sampled: meta-test {episodes} (seeds)"], rows)
     missing = len(args.variants) * len(args.seeds) - len(runs)
     remaining = sum(max(0, args.steps - r["steps_done"]) for r in runs.values()) + missing * args.steps
     print(f"remaining: {remaining:,} env steps ({len(runs)} runs started, {missing} not started)")
