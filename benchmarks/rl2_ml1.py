@@ -12,8 +12,8 @@ from its checkpoint, then evaluates the checkpoint on `--trials` trials of the M
 hidden state (the PPO baseline plays the same trials; it cannot adapt, so its curve is flat),
 once acting with the policy's mean and once sampling from it (as Duan et al.'s meta-test; an RL²
 policy's first-episode search may live in its sampling noise). A finished run given again gets
-any evaluation it lacks. Evaluations are kept in each run's `meta_evals.jsonl`; the table and JSON are rebuilt from
-them, so run it again to continue.
+any evaluation it lacks. Evaluations are kept in each run's `meta_evals.jsonl`; the table and
+JSON are rebuilt from them, so run it again to continue.
 
 Reference: the Meta-World paper (Yu et al., CoRL 2019; arXiv 1910.10897) reports ML1 only as
 learning curves, not a table: arXiv v2 Figure 4 ("Comparison on our simplest meta-RL
@@ -100,6 +100,16 @@ def evaluation_points(seeds: list[dict]) -> list[dict]:
     return points
 
 
+def episode_ends(curves: list[list[float]], count_seeds: bool) -> str:
+    """Success at a trial's first and last episode, mean over the seeds that have `curves`
+    ('-' where none has); with `count_seeds` the number of those seeds too (sampled-action
+    evaluations exist for fewer seeds than the point has)."""
+    if not curves:
+        return "-"
+    ends = f"{np.mean([c[0] for c in curves]):.2f} -> {np.mean([c[-1] for c in curves]):.2f}"
+    return f"{ends} ({len(curves)})" if count_seeds else ends
+
+
 def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     """Left: meta-test success at episode 1 (dashed) and episode K (solid) of a trial vs env steps,
     mean over seeds. Right: the adaptation curve (success at episode 1..K on held-out goals) at
@@ -176,10 +186,8 @@ def main() -> None:
     for variant in args.variants:
         for point in evaluation_points([r for r in runs.values() if r["variant"] == variant]):
             low, high = min(point["steps"]), max(point["steps"])
-            cell = {key: f"{np.mean([c[0] for c in point[key]]):.2f} -> {np.mean([c[-1] for c in point[key]]):.2f}"
-                    + (f" ({len(point[key])})" if key.endswith("sampled") else "") if point[key] else "-" for key in SPLITS}
             rows.append([variant, f"{low:,}" if low == high else f"{low:,}-{high:,}", len(point["steps"]),
-                         *(cell[key] for key in SPLITS)])
+                         *(episode_ends(point[key], count_seeds=key.endswith("sampled")) for key in SPLITS)])
     episodes = f"ep 1 -> {TRIAL_EPISODES}"
     print_table(["variant", "env steps", "seeds", f"meta-train {episodes}", f"meta-test {episodes}",
                  f"sampled: meta-train {episodes} (seeds)", f"sampled: meta-test {episodes} (seeds)"], rows)
