@@ -1,4 +1,5 @@
-"""Every shipped YAML validates, and `validate` / `tasks` summarise them."""
+"""Every shipped YAML validates (the benchmarks' configs too: a broken one would otherwise
+surface only hours into a benchmark), and `validate` / `tasks` summarise them."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ from taskforge.cli import main
 from tests.conftest import ROOT
 
 SHIPPED = sorted(
-    str(p.relative_to(ROOT)) for folder in ("tasks", "agents", "curricula") for p in (ROOT / folder).rglob("*.yaml")
+    str(p.relative_to(ROOT)) for folder in ("tasks", "agents", "curricula", "benchmarks/configs")
+    for p in (ROOT / folder).rglob("*.yaml")
 )
 
 
