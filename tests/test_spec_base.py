@@ -1,4 +1,4 @@
-"""Task and agent variants written as `base:` + the fields that differ: merged like the full
+"""Task, agent and curriculum variants written as `base:` + the fields that differ: merged like the full
 file would be, paths kept pointing at the same files, and a bad `base:` is one clear line."""
 
 from __future__ import annotations
@@ -9,7 +9,8 @@ import pytest
 import yaml
 
 from taskforge.cli import main
-from taskforge.spec import SpecError, load_agent_spec, load_task_spec, read_task_yaml
+from taskforge.envs import load_curriculum
+from taskforge.spec import SpecError, load_agent_spec, load_curriculum_spec, load_task_spec, read_task_yaml
 from tests.conftest import PICK_PLACE, ROOT
 
 XARM = ROOT / "tasks/xarm7"
@@ -128,3 +129,41 @@ def test_agent_preset_variant(tmp_path, capsys):
     assert (spec.policy, spec.rl2, spec.algo) == (base.policy, base.rl2, base.algo)
     assert main(["validate", str(variant)]) == 0  # recognised as an agent preset through its base
     assert "agent long-bptt: rl2" in capsys.readouterr().out
+
+
+def test_curriculum_variant_in_another_folder_keeps_its_base_files(tmp_path, capsys):
+    """A curriculum's agent, phase tasks and demos are relative to the file that writes them: a
+    variant elsewhere must still train the base's agent on the base's tasks."""
+    variant = _write(tmp_path / "bench/configs/ppo_reach.yaml", {
+        "base": str(ROOT / "curricula/ml1_reach_rl2.yaml"), "name": "ppo-reach", "total_steps": 2000,
+    })
+    base = load_curriculum(ROOT / "curricula/ml1_reach_rl2.yaml")
+    cur = load_curriculum(variant)
+    assert cur.agent_file == base.agent_file and cur.agent == base.agent
+    assert [p.task_file for p in cur.phases] == [p.task_file for p in base.phases]
+    assert (cur.spec.name, cur.spec.total_steps, cur.spec.evaluation) == ("ppo-reach", 2000, base.spec.evaluation)
+    assert main(["validate", str(variant)]) == 0  # recognised as a curriculum through its base
+    assert "curriculum ppo-reach" in capsys.readouterr().out
+
+    demos = _write(tmp_path / "curricula/with_demos.yaml", {
+        "base": str(ROOT / "curricula/pick_place.yaml"),
+        "warm_start": {"demos": "../demos/pp.npz", "phase": 0, "stage": "reach"},
+    })
+    deeper = _write(tmp_path / "curricula/variants/v.yaml", {"base": "../with_demos.yaml", "seed": 3})
+    demos_path = load_curriculum_spec(deeper).warm_start.demos
+    assert (deeper.parent / demos_path).resolve() == (tmp_path / "demos/pp.npz").resolve()
+    assert load_curriculum_spec(demos).warm_start.demos == "../demos/pp.npz"
+
+
+@pytest.mark.parametrize("variant,base,changed", [
+    ("ml1_push_ppo.yaml", "ml1_push_rl2.yaml", {"name", "agent"}),
+    ("ml1_reach_ppo.yaml", "../../curricula/ml1_reach_rl2.yaml", {"name", "agent", "total_steps", "replay"}),
+    ("ml1_reach_rl2_whole_trial.yaml", "../../curricula/ml1_reach_rl2.yaml", {"name", "agent", "total_steps", "replay"}),
+])
+def test_benchmark_baselines_differ_from_their_base_only_where_they_say(variant, base, changed):
+    """The memoryless baselines must play RL²'s task with RL²'s evaluation; as variants they cannot drift."""
+    configs = ROOT / "benchmarks/configs"
+    spec, base_spec = load_curriculum(configs / variant), load_curriculum(configs / base)
+    assert [p.task_file for p in spec.phases] == [p.task_file for p in base_spec.phases]
+    same = set(type(spec.spec).model_fields) - changed - {"phases"}
+    assert {f: getattr(spec.spec, f) for f in same} == {f: getattr(base_spec.spec, f) for f in same}

@@ -49,14 +49,16 @@ def validate(model: type[M], data: dict[str, Any], file: str | Path) -> M:
         raise SpecError(issues) from None
 
 
-# Fields of a task file that hold paths (relative to the file that writes them).
+# Fields that hold paths (relative to the file that writes them); "*" stands for every item of a list.
 _TASK_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("backend", "robot_model"),)
+_CURRICULUM_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("agent",), ("phases", "*", "task"), ("warm_start", "demos"))
 
 
 def read_yaml_with_base(
     path: str | Path, path_fields: tuple[tuple[str, ...], ...] = (), _chain: tuple[Path, ...] = ()
 ) -> dict[str, Any]:
-    """A task or agent file's mapping merged over the file its `base:` names (bases may have bases).
+    """A task, agent or curriculum file's mapping merged over the file its `base:` names (bases
+    may have bases).
 
     Why: a variant (a bigger cube, the object drawn per trial, an agent with longer BPTT) differs
     from its base in a field or two. Writing only those keeps the variant in step with its base
@@ -89,16 +91,22 @@ def read_task_yaml(path: str | Path) -> dict[str, Any]:
     return read_yaml_with_base(path, _TASK_PATH_FIELDS)
 
 
-def _rebase_path(data: dict[str, Any], field: tuple[str, ...], old_file: Path, new_file: Path) -> None:
-    """Rewrite a relative path at `field` so that it names the same file from `new_file`'s folder."""
-    *parents, key = field
-    for part in parents:
-        data = data.get(part)
-        if not isinstance(data, dict):
-            return
-    value = data.get(key)
+def _rebase_path(data: Any, field: tuple[str, ...], old_file: Path, new_file: Path) -> None:
+    """Rewrite a relative path at `field` so that it names the same file from `new_file`'s folder.
+    Anything not shaped as `field` expects is left for schema validation to report."""
+    head, *rest = field
+    if head == "*":
+        for item in data if isinstance(data, list) else ():
+            _rebase_path(item, tuple(rest), old_file, new_file)
+        return
+    if not isinstance(data, dict):
+        return
+    if rest:
+        _rebase_path(data.get(head), tuple(rest), old_file, new_file)
+        return
+    value = data.get(head)
     if isinstance(value, str) and not Path(value).is_absolute():
-        data[key] = os.path.relpath(resolve_relative(old_file, value), new_file.parent)
+        data[head] = os.path.relpath(resolve_relative(old_file, value), new_file.parent)
 
 
 def _merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
@@ -119,7 +127,7 @@ def load_agent_spec(path: str | Path) -> AgentSpec:
 
 
 def load_curriculum_spec(path: str | Path) -> CurriculumSpec:
-    return validate(CurriculumSpec, read_yaml(path), path)
+    return validate(CurriculumSpec, read_yaml_with_base(path, _CURRICULUM_PATH_FIELDS), path)
 
 
 def resolve_relative(base_file: str | Path, ref: str) -> Path:
