@@ -1,5 +1,5 @@
-"""Task, agent and curriculum variants written as `base:` + the fields that differ: merged like the full
-file would be, paths kept pointing at the same files, and a bad `base:` is one clear line."""
+"""Task, agent and curriculum variants written as `base:` + the fields that differ: merged like
+the full file would be, paths kept pointing at the same files, and a bad `base:` is one clear line."""
 
 from __future__ import annotations
 
@@ -164,6 +164,6 @@ def test_benchmark_baselines_differ_from_their_base_only_where_they_say(variant,
     """The memoryless baselines must play RL²'s task with RL²'s evaluation; as variants they cannot drift."""
     configs = ROOT / "benchmarks/configs"
     spec, base_spec = load_curriculum(configs / variant), load_curriculum(configs / base)
-    assert [p.task_file for p in spec.phases] == [p.task_file for p in base_spec.phases]
+    assert [(p.task_file, p.stages) for p in spec.phases] == [(p.task_file, p.stages) for p in base_spec.phases]
     same = set(type(spec.spec).model_fields) - changed - {"phases"}
     assert {f: getattr(spec.spec, f) for f in same} == {f: getattr(base_spec.spec, f) for f in same}
