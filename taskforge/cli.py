@@ -53,6 +53,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
                 # One policy for every phase: their observation/action shapes must agree.
                 probe_phases([(p.task, p.task_file) for p in curriculum.phases], curriculum.agent.asymmetric_critic, path)
                 lines = curriculum_summary(curriculum)
+                for warning in curriculum.warnings:
+                    print(f"warning: {warning}", file=sys.stderr)
         except SpecError as exc:
             issues += exc.issues
             continue
@@ -78,7 +80,9 @@ def cmd_tasks(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from taskforge.training import CHECKPOINT, FINAL, Interrupted, load_checkpoint, train
+    import json
+
+    from taskforge.training import CHECKPOINT, FINAL, FINAL_EVAL, Interrupted, load_checkpoint, train
 
     if args.steps is not None and args.steps < 1:
         raise SpecError.single("--steps", "", f"expected a positive number of steps (got {args.steps})")
@@ -94,6 +98,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     step, total = state["agent"]["global_step"], state["config"]["total_steps"]
     if step >= total:
         print(f"done: {run_dir} (final policy {run_dir / FINAL})")
+        if (run_dir / FINAL_EVAL).is_file():
+            ev = json.loads((run_dir / FINAL_EVAL).read_text())
+            low, high = ev["success_ci95"]
+            print(f"held-out success of '{ev['stage']}' ({ev['split']} split, {ev['episodes']} episodes): "
+                  f"{ev['success_rate']:.2f} (95 % CI {low:.2f}-{high:.2f})")
     else:
         print(f"paused at step {step:,} of {total:,}: {run_dir} (continue with --resume)")
     return 0

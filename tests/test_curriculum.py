@@ -81,6 +81,32 @@ def test_no_promotion_until_min_steps_spent():
     assert event.step == 1000
 
 
+def test_without_min_steps_a_stage_already_mastered_passes_as_soon_as_the_window_fills():
+    """A warm-started policy that already passes is not held back by a fixed minimum."""
+    scheduler = make_scheduler([["a", "b", "c"]], promotion={"threshold": 0.8, "window": 5})
+    assert feed(scheduler, [True] * 4) == []
+    [event] = feed(scheduler, [True])
+    assert (event.to_stage, event.step, event.reason) == ("b", 50, "threshold")
+
+
+def test_a_stage_that_plateaus_is_passed_when_its_step_budget_is_spent():
+    scheduler = make_scheduler([["a", "b"]], promotion={"threshold": 0.8, "window": 10, "max_steps": 300})
+    assert feed(scheduler, [False, True] * 14) == []  # 280 steps at 0.5: below the threshold, budget left
+    assert feed(scheduler, [True]) == []  # 290 steps
+    [event] = feed(scheduler, [False])  # 300 steps: the budget is spent
+    assert (event.kind, event.from_stage, event.to_stage, event.reason) == ("promote", "a", "b", "budget")
+    assert event.step == 300 and event.success_rate == pytest.approx(0.5)
+    assert scheduler.stage == "b"  # the budget restarts in the new stage
+    assert feed(scheduler, [False] * 29) == []
+    [last] = feed(scheduler, [False])
+    assert (last.kind, last.reason, scheduler.finished) == ("finish", "budget", True)
+
+
+def test_a_budget_below_the_minimum_is_refused():
+    with pytest.raises(ValueError, match="'max_steps' \\(10\\) must be >= 'min_steps' \\(100\\)"):
+        make_spec([{"task": "t.yaml"}], promotion={"min_steps": 100, "max_steps": 10})
+
+
 def test_window_counts_only_the_last_episodes():
     scheduler = make_scheduler([["a", "b"]], promotion={"threshold": 1.0, "window": 3, "min_steps": 0})
     assert feed(scheduler, [False, True, True, False, True, True]) == []

@@ -208,10 +208,11 @@ def test_training_pretrains_once_and_the_regularizer_survives_resume(tmp_path):
     train(cur, run_dir=run, steps=400, progress=False)
     train(cur, run_dir=run, steps=600, resume=True, progress=False)
     metrics = read_jsonl(run / "metrics.jsonl")
-    assert metrics[0]["step"] == 0 and "bc_action_mse" in metrics[0] and "bc_value_mse" in metrics[0]
+    # the 100 demo steps count in the budget: the run's clock starts there
+    assert metrics[0]["step"] == 100 and "bc_action_mse" in metrics[0] and "bc_value_mse" in metrics[0]
     assert sum("bc_action_mse" in m for m in metrics) == 1  # not pretrained again on resume
     updates = [m for m in metrics if "bc_weight" in m]
-    assert [m["step"] for m in updates] == [200, 400, 600]
+    assert [m["step"] for m in updates] == [300, 500, 700]
     assert [m["bc_weight"] for m in updates] == [0.5, 0.25, 0.125]  # decay continues across the resume
 
 
@@ -241,4 +242,5 @@ def test_training_generates_metaworld_demos_and_keeps_them_for_resume(tmp_path):
         meta = json.loads(str(data["metadata"]))
         assert meta["stage"] == "reach" and meta["episodes_run"] == 2 and data["observations"].shape[1] == 39
     first = read_jsonl(run / "metrics.jsonl")[0]
-    assert first["step"] == 0 and first["bc_demo_episodes"] == meta["episodes_kept"]
+    assert meta["steps_run"] == 2 * 150  # both reach episodes ran to the stage's time limit
+    assert first["step"] == meta["steps_run"] and first["bc_demo_episodes"] == meta["episodes_kept"]

@@ -7,7 +7,9 @@ any number of workers and tests can drive it from scripted success streams.
 Semantics (the trainer relies on these):
 - Promotion: the current stage is passed when its promotion window (the last `window` episodes
   *assigned to it as the current stage*) is full, its success rate is ≥ `threshold`, and at least
-  `min_steps` env steps of those episodes were spent in it since it was (re-)entered. The phase's
+  `min_steps` env steps of those episodes were spent in it since it was (re-)entered (reason
+  `threshold`); or, with `max_steps`, when that many steps were spent in it without passing
+  (reason `budget`: a stage that plateaus below the threshold does not hold the run). The phase's
   own promotion rule replaces the curriculum-wide one. Passing the last stage of a phase enters the
   next phase's first stage. Passing the very last stage sets `finished` and freezes the position:
   training may go on there, but nothing promotes or demotes any more.
@@ -48,6 +50,7 @@ from taskforge.spec import CurriculumSpec
 STATE_VERSION = 1
 
 EventKind = Literal["promote", "demote", "finish"]
+EventReason = Literal["threshold", "budget"]
 
 
 @dataclass(frozen=True)
@@ -63,8 +66,9 @@ class Assignment:
 
 @dataclass(frozen=True)
 class CurriculumEvent:
-    """A change of position. `success_rate` is the window rate that triggered it. A `finish` event
-    has the last stage as both `from` and `to`."""
+    """A change of position. `success_rate` is the window rate that triggered it (for a `budget`
+    move, the rate of the partly filled window). A `finish` event has the last stage as both
+    `from` and `to`. `reason` says whether the threshold was met or the stage's step budget spent."""
 
     kind: EventKind
     step: int
@@ -73,6 +77,7 @@ class CurriculumEvent:
     to_phase: int
     to_stage: str
     success_rate: float
+    reason: EventReason = "threshold"
 
 
 def _rate(window: deque[bool]) -> float:
@@ -223,17 +228,17 @@ class CurriculumScheduler:
     def _try_promote(self) -> CurriculumEvent | None:
         rule = self._promotion[self._phase]
         window = self._promotion_window
-        if len(window) < rule.window or self._stage_steps < rule.min_steps:
+        passed = len(window) >= rule.window and self._stage_steps >= rule.min_steps and _rate(window) >= rule.threshold
+        over_budget = rule.max_steps is not None and self._stage_steps >= rule.max_steps
+        if not (passed or over_budget):
             return None
-        rate = _rate(window)
-        if rate < rule.threshold:
-            return None
+        rate, reason = _rate(window), "threshold" if passed else "budget"
         if self._stage + 1 < len(self._stages[self._phase]):
-            return self._move("promote", self._phase, self._stage + 1, rate)
+            return self._move("promote", self._phase, self._stage + 1, rate, reason)
         if self._phase + 1 < len(self._stages):
-            return self._move("promote", self._phase + 1, 0, rate)
+            return self._move("promote", self._phase + 1, 0, rate, reason)
         self._finished = True
-        return self._move("finish", self._phase, self._stage, rate)
+        return self._move("finish", self._phase, self._stage, rate, reason)
 
     def _try_demote(self) -> CurriculumEvent | None:
         rule = self._spec.demotion
@@ -245,7 +250,7 @@ class CurriculumScheduler:
             return None
         return self._move("demote", self._phase, self._stage - 1, rate)
 
-    def _move(self, kind: EventKind, phase: int, stage: int, rate: float) -> CurriculumEvent:
+    def _move(self, kind: EventKind, phase: int, stage: int, rate: float, reason: EventReason = "threshold") -> CurriculumEvent:
         event = CurriculumEvent(
             kind=kind,
             step=self._total_steps,
@@ -254,6 +259,7 @@ class CurriculumScheduler:
             to_phase=phase,
             to_stage=self._stages[phase][stage],
             success_rate=rate,
+            reason=reason,
         )
         self._events.append(event)
         if kind != "finish":

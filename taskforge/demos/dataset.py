@@ -94,6 +94,7 @@ def record(
     steps: dict[str, list] = {k: [] for k in (*STEP_KEYS, "privileged")}
     kept: dict[str, list] = {k: [] for k in EPISODE_KEYS}
     successes = 0
+    steps_run = 0  # failed episodes included: every step the expert took costs env time
     bar = _progress_bar(episodes, f"{env.task.name}:{stage}", progress)
     for k in range(episodes):
         goal_index = (seed + k) % num_goals
@@ -114,6 +115,7 @@ def record(
                 break
         success = bool(info["episode_success"])
         successes += success
+        steps_run += len(episode["actions"])
         if success or keep_failed:
             length = len(episode["actions"])
             episode["episode_starts"] = [True] + [False] * (length - 1)
@@ -146,6 +148,7 @@ def record(
         "policy": getattr(policy, "name", type(policy).__name__),
         "episodes_run": episodes,
         "episodes_kept": len(kept["episode_lengths"]),
+        "steps_run": steps_run,
         "successes": successes,
         "success_rate": successes / episodes,
         "keep_failed": keep_failed,

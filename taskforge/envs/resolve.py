@@ -20,7 +20,7 @@ from taskforge.spec import (
     load_task_spec,
     resolve_relative,
 )
-from taskforge.terms import task_issues
+from taskforge.terms import GOAL_FEATURES, task_issues
 
 
 def load_task(path: str | Path) -> TaskSpec:
@@ -49,6 +49,8 @@ class ResolvedCurriculum:
     phases: list[CurriculumPhase]
     demos_file: Path | None = None
     """`warm_start.demos`, resolved relative to the curriculum file."""
+    warnings: tuple[str, ...] = ()
+    """Legal but probably unintended (see `hidden_goal_warnings`); `validate` and `train` print them."""
 
 
 def load_curriculum(path: str | Path) -> ResolvedCurriculum:
@@ -78,7 +80,32 @@ def load_curriculum(path: str | Path) -> ResolvedCurriculum:
         demos_file = _check_warm_start(spec, path, agent, phases, issues)
     if issues:
         raise SpecError(issues)
-    return ResolvedCurriculum(path, spec, agent_file, agent, phases, demos_file)
+    warnings = tuple(hidden_goal_warnings(path, agent, phases))
+    return ResolvedCurriculum(path, spec, agent_file, agent, phases, demos_file, warnings)
+
+
+def hidden_goal_warnings(path: Path, agent: AgentSpec, phases: list[CurriculumPhase]) -> list[str]:
+    """One line per stage where an agent that cannot infer a hidden goal trains on a stage whose
+    success depends on it. Only RL² reads rewards, so only RL² can find a goal it does not see;
+    any other agent (an LSTM included) can reach a held-out goal only by chance, or by memorising
+    the train goals through whatever else the observation shows. A memoryless baseline for RL²
+    is exactly that, so this is a warning, not an error."""
+    if agent.algo == "rl2":
+        return []
+    lines = []
+    for i, phase in enumerate(phases):
+        task = phase.task
+        if task.goals.observable or "goal_pos" not in backend_features(task):
+            continue
+        for stage in task.stages:
+            needs = sorted({c.feature for c in stage.success.all} & GOAL_FEATURES)
+            if stage.name in phase.stages and needs:
+                lines.append(
+                    f"{path}: phases[{i}] stage '{stage.name}' of {phase.task_file}: success depends on the goal "
+                    f"({', '.join(needs)}) but goals.observable is false; a {agent.algo.upper()} agent does not see the "
+                    "reward, so it cannot find a held-out goal: set goals.observable: true, or train with algo: rl2"
+                )
+    return lines
 
 
 def _check_warm_start(

@@ -55,6 +55,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         seed: int | None = None,
         task_name: str | None = None,
         privileged: bool = False,
+        end_on_success: bool = False,
     ):
         if split not in SPLITS:
             raise SpecError.single(file, "split", f"unknown split '{split}'; expected train or test")
@@ -62,6 +63,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self.file = str(file)
         self.split: Split = split
         self.privileged = privileged
+        self.end_on_success = end_on_success
+        """Terminate every episode at its first success, whatever the stage says (evaluation)."""
         self.backend: Backend = make_backend(task, file)
         self.stages = {s.name: CompiledStage(s, file, f"stages[{i}]") for i, s in enumerate(task.stages)}
         self.stage = self._check_stage(stage or task.stages[0].name)
@@ -174,7 +177,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         features["stage_success"] = float(success)
         reward, terms = stage.reward(features)
 
-        terminated = ended or (success and stage.spec.terminate_on_success)
+        terminated = ended or (success and (stage.spec.terminate_on_success or self.end_on_success))
         truncated = self._t >= self.max_episode_steps
         return self._observe(obs), reward, terminated, truncated, self._info(features, success, terms)
 

@@ -89,16 +89,21 @@ def evaluate(
     seed: int = 0,
     parallel: int = 4,
     deterministic: bool = True,
+    stop_on_success: bool = False,
 ) -> StageResult:
     """Run `trials` trials of `stage` (one sub-task of a set, or all), each of `trial_episodes`
     episodes (default: the agent's K, 1 for PPO) on one goal. Sampled actions (`deterministic`
     False) draw from the agent's generator reseeded with `seed`, and its state is restored
-    afterwards, so an evaluation during training leaves the training's random stream alone."""
+    afterwards, so an evaluation during training leaves the training's random stream alone.
+    `stop_on_success` ends each episode at its first success (same success rate, fewer steps)."""
     k = trial_episodes or agent.spec.trial_episodes
     rl2 = agent.spec.algo == "rl2"
     privileged = agent.privileged_dim > 0
     envs = [
-        RL2Trial(TaskEnv(task, task_file, stage=stage, split=split, task_name=sub_task, privileged=privileged), k, augment=rl2)
+        RL2Trial(
+            TaskEnv(task, task_file, stage=stage, split=split, task_name=sub_task, privileged=privileged, end_on_success=stop_on_success),
+            k, augment=rl2,
+        )
         for _ in range(min(parallel, trials))
     ]
     num_goals = envs[0].unwrapped.backend.num_goals(split)

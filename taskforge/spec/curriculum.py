@@ -12,11 +12,23 @@ from taskforge.spec.common import StrictModel
 
 class PromotionSpec(StrictModel):
     """Promote when success over the last `window` episodes of the current stage is at least
-    `threshold` and the stage has run for `min_steps` env steps."""
+    `threshold` and the stage has run for `min_steps` env steps; or, when `max_steps` is set, once
+    the stage has spent that many env steps without passing (a plateau must not hold the run)."""
 
     threshold: float = Field(default=0.8, ge=0.0, le=1.0)
     window: int = Field(default=100, ge=1)
     min_steps: int = Field(default=0, ge=0)
+    """A floor on the steps spent in a stage before it may pass; 0 (the default) promotes as soon
+    as the window shows the threshold, so a warm-started policy that already passes moves on."""
+    max_steps: int | None = Field(default=None, ge=1)
+    """The stage's step budget: after this many env steps in it the curriculum moves on anyway
+    (event `promote` with reason `budget`); default none (wait for the threshold)."""
+
+    @model_validator(mode="after")
+    def _budget_above_floor(self) -> "PromotionSpec":
+        if self.max_steps is not None and self.max_steps < self.min_steps:
+            raise ValueError(f"'max_steps' ({self.max_steps}) must be >= 'min_steps' ({self.min_steps})")
+        return self
 
 
 class DemotionSpec(StrictModel):
@@ -48,6 +60,10 @@ class EvaluationSpec(StrictModel):
     stage: str | None = None
     """Evaluate this stage of the current phase (e.g. the final `place`, to compare a curriculum
     with flat training); default: whichever stage the curriculum is on."""
+    stop_on_success: bool = False
+    """End each evaluation episode when the stage first succeeds. Success counts if it held at
+    any step, so the success rate is unchanged and a good policy is evaluated several times
+    faster; returns and lengths then cover the steps up to success only."""
 
 
 class CheckpointSpec(StrictModel):
@@ -84,6 +100,43 @@ class RegularizerSpec(StrictModel):
     """Multiplies the weight after every PPO update (DAPG's 0.95: 1 % of the weight after 90)."""
 
 
+class DaggerSpec(StrictModel):
+    """DAgger after the demos: roll out the pretrained student, label the states it visits with
+    the scripted policy's action, aggregate, refit (`taskforge/training/dagger.py`)."""
+
+    rounds: int = Field(default=0, ge=0)
+    """Rounds of student rollouts after the recorded demos; 0 = behaviour cloning only."""
+    steps_per_round: int = Field(default=10_000, ge=1)
+    """Env steps the student runs per round (all envs together); they count in the run's budget."""
+    epochs: int = Field(default=20, ge=1)
+    """Passes over the aggregate at each refit (warm-started from the previous fit)."""
+
+
+class FineTuneSpec(StrictModel):
+    """How PPO starts from the pretrained policy, so that it does not undo it."""
+
+    exploration_std: Literal["auto", "preset"] | float = "auto"
+    """`auto`: per action dimension, `std_scale` times the pretrained policy's RMS error on the
+    expert's actions, clipped to [`std_min`, `std_max`]; `preset`: the agent's `init_log_std`;
+    a number: that std for every dimension."""
+    std_scale: float = Field(default=1.0, gt=0.0)
+    std_min: float = Field(default=0.05, gt=0.0)
+    std_max: float = Field(default=1.0, gt=0.0)
+    critic_warmup_steps: int = Field(default=0, ge=0)
+    """Env steps of PPO updates that train only the critic before the actor moves."""
+    freeze_observation_statistics: bool = True
+    """Keep the observation normaliser at the statistics the policy was pretrained with; PPO's
+    rollouts would otherwise shift them and with them the pretrained behaviour."""
+
+    @model_validator(mode="after")
+    def _std_range(self) -> "FineTuneSpec":
+        if self.std_min > self.std_max:
+            raise ValueError(f"'std_min' ({self.std_min}) must be <= 'std_max' ({self.std_max})")
+        if isinstance(self.exploration_std, float) and self.exploration_std <= 0:
+            raise ValueError(f"'exploration_std' must be 'auto', 'preset' or a positive number (got {self.exploration_std})")
+        return self
+
+
 class WarmStartSpec(StrictModel):
     """Pretrain the agent on demonstrations before the curriculum starts, then keep a decaying
     BC term in PPO's loss (MLP policies only)."""
@@ -102,6 +155,8 @@ class WarmStartSpec(StrictModel):
     bc_batch_size: int = Field(default=256, ge=1)
     bc_learning_rate: float = Field(default=1e-3, gt=0.0)
     regularizer: RegularizerSpec = RegularizerSpec()
+    dagger: DaggerSpec = DaggerSpec()
+    fine_tune: FineTuneSpec = FineTuneSpec()
 
     @model_validator(mode="after")
     def _one_source(self) -> "WarmStartSpec":

@@ -1,7 +1,7 @@
 """Reward terms, success conditions and feature names: small pure functions over a features
 dict, each registered by name (Isaac Lab's manager-based terms, without the managers)."""
 
-from taskforge.terms.features import ENV_FEATURES, FEATURES, SCALAR_FEATURES, FeatureInfo, Features
+from taskforge.terms.features import ENV_FEATURES, FEATURES, GOAL_FEATURES, SCALAR_FEATURES, FeatureInfo, Features
 from taskforge.terms.kernels import KERNELS
 from taskforge.terms.rewards import REWARD_TERMS, RewardTerm, reward_term
 from taskforge.terms.stage import CompiledStage, stage_issues, task_issues
@@ -9,6 +9,7 @@ from taskforge.terms.stage import CompiledStage, stage_issues, task_issues
 __all__ = [
     "ENV_FEATURES",
     "FEATURES",
+    "GOAL_FEATURES",
     "KERNELS",
     "REWARD_TERMS",
     "SCALAR_FEATURES",

@@ -42,6 +42,10 @@ FEATURES: dict[str, FeatureInfo] = {
     "stage_success": FeatureInfo(1, "1 when the current stage's success condition holds"),
 }
 
+GOAL_FEATURES = frozenset({"goal_pos", "object_to_goal_distance", "tcp_to_goal_distance", "native_success"})
+"""Features that depend on where the goal is (Meta-World's own success flag measures to its goal):
+a success condition on one of them cannot be met on a held-out goal the policy neither sees nor
+can infer."""
 ENV_FEATURES = frozenset({"action", "stage_success"})
 """Filled by the env itself on every backend."""
 SCALAR_FEATURES = frozenset(name for name, info in FEATURES.items() if info.size == 1)

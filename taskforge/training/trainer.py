@@ -33,6 +33,7 @@ from taskforge.training.warm_start import prepare_warm_start
 
 CHECKPOINT = "checkpoint.pt"
 FINAL = "final.pt"
+FINAL_EVAL = "final_eval.json"
 
 
 class Interrupted(Exception):
@@ -87,6 +88,8 @@ def train(
     jobs; the schedule still spans `steps`, which a chunked `steps` on every resume would not
     (each chunk would anneal the learning rate to zero)."""
     cur = load_curriculum(curriculum_file)
+    for warning in cur.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     run_dir = Path(run_dir) if run_dir else Path("runs") / f"{cur.spec.name}-seed{cur.spec.seed if seed is None else seed}"
     ckpt_file = run_dir / CHECKPOINT
     state: dict[str, Any] | None = None
@@ -131,6 +134,12 @@ def train(
     save_json(config, run_dir / "config.json")
     logger = MetricsLogger(run_dir, resume_step=agent.global_step if state else None)
     if warm is not None:
+        if warm.metrics is not None:  # evaluate right after pretraining: the curve starts where the demos left it
+            result = _evaluate_current(agent, cur, scheduler, seed)
+            warm.metrics.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
+            if progress:
+                print(f"[{agent.global_step:,}] eval {result.stage} on {result.split} after pretraining: "
+                      f"success {result.success_rate:.2f}", file=sys.stderr)
         warm.record(run_dir, logger)
 
     def snapshot() -> dict[str, Any]:
@@ -141,6 +150,7 @@ def train(
     next_ckpt = (agent.global_step // every_ckpt + 1) * every_ckpt
     next_eval = (agent.global_step // every_eval + 1) * every_eval
     last_good = snapshot()  # what a Ctrl-C saves: the state after the last complete update
+    last_eval: tuple[int, Any] | None = None
 
     previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
     envs = _build_envs(cur, scheduler.phase, privileged)
@@ -156,7 +166,8 @@ def train(
             episodes, events = driver.drain()
             for event in events:
                 logger.event(asdict(event))
-                bar.write(f"[{event.step:,}] {event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f})")
+                why = ", step budget spent" if event.reason == "budget" else ""
+                bar.write(f"[{agent.global_step:,}] {event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f}{why})")
 
             per_stage: dict[str, list[bool]] = {}
             for success, stage in zip(episodes.successes, episodes.stages):
@@ -178,6 +189,7 @@ def train(
             if agent.global_step >= next_eval:
                 next_eval += every_eval
                 result = _evaluate_current(agent, cur, scheduler, seed)
+                last_eval = (agent.global_step, result)
                 record.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
                 bar.write(f"[{agent.global_step:,}] eval {result.stage} on {result.split}: success {result.success_rate:.2f}")
             logger.log(agent.global_step, record)
@@ -208,14 +220,31 @@ def train(
     save_checkpoint(last_good, ckpt_file)
     if agent.global_step >= total:
         save_checkpoint({"config": config, "agent": last_good["agent"]}, run_dir / FINAL)
+        _final_evaluation(agent, cur, scheduler, seed, run_dir, last_eval)
     return run_dir
+
+
+def _final_evaluation(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: CurriculumScheduler, seed: int,
+                      run_dir: Path, last_eval: tuple[int, Any] | None) -> None:
+    """What the run ends with: the evaluation (the curriculum's `evaluation` settings) of the final
+    policy on the final stage (`evaluation.stage`, else the phase's last), written to
+    `final_eval.json` for `taskforge train` to print."""
+    phase = cur.phases[scheduler.phase]
+    ev = cur.spec.evaluation
+    stage = ev.stage or phase.stages[-1]
+    if last_eval is not None and last_eval[0] == agent.global_step and last_eval[1].stage == stage:
+        result = last_eval[1]  # the periodic evaluation already ran on this very policy
+    else:
+        result = evaluate(agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=seed + 10_000,
+                          stop_on_success=ev.stop_on_success)
+    save_json({"step": agent.global_step, **result.as_dict()}, run_dir / FINAL_EVAL)
 
 
 def _evaluate_current(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: CurriculumScheduler, seed: int):
     phase = cur.phases[scheduler.phase]
     ev = cur.spec.evaluation
     stage = ev.stage or scheduler.stage
-    return evaluate(agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=seed + 10_000)
+    return evaluate(agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=seed + 10_000, stop_on_success=ev.stop_on_success)
 
 
 def _raise_keyboard_interrupt(signum, frame) -> None:

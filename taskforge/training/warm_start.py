@@ -1,23 +1,42 @@
-"""The curriculum's `warm_start`: get the demonstrations (a file, or scripted episodes recorded
-now), pretrain the agent on them (fresh runs only), and install PPO's decaying BC term.
+"""The curriculum's `warm_start`: learn from the scripted expert before PPO, then hand over to
+PPO without losing what was learnt.
 
-Generated demos are saved in the run directory (`demos.npz`), so `--resume` reinstalls the
-same regulariser without recording them again.
+Reading order (fresh runs; `--resume` only reinstalls the BC term from the saved data):
+
+1. demonstrations: a file, or scripted episodes recorded now (train goals);
+2. behaviour cloning of the actor and value regression of the critic on them (`agents/bc.py`);
+3. DAgger rounds (`dagger.py`): the student's own states, labelled by the expert, aggregated;
+4. the hand-over to PPO (`fine_tune`): exploration noise sized from the student's cloning error
+   instead of the preset's std of 1, critic-only updates first, and DAPG's decaying BC term on
+   everything the expert labelled.
+
+Every env step the expert or the student took here counts in the run's step budget, so a curve
+of a warm-started run is comparable with one from scratch at the same x.
 """
 
 from __future__ import annotations
 
+import math
+import sys
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from taskforge import demos as demo_io
-from taskforge.agents import PPOAgent
-from taskforge.agents.bc import pretrain, returns_to_go, scaled_rewards
-from taskforge.envs import ResolvedCurriculum
+from taskforge.agents import PPOAgent, make_vector_env
+from taskforge.agents.bc import fit_exploration_std, pretrain, returns_to_go, scaled_rewards
+from taskforge.atomic import atomic_write
+from taskforge.demos.labels import ExpertLabels
+from taskforge.envs import ResolvedCurriculum, TaskEnv
 from taskforge.spec import SpecError
+from taskforge.spec.curriculum import WarmStartSpec
+from taskforge.training.dagger import DaggerRound, dagger
 
 DEMOS_FILE = "demos.npz"
+DAGGER_FILE = "dagger.npz"
 
 
 @dataclass
@@ -26,60 +45,158 @@ class WarmStart:
     generated: bool
     metrics: dict[str, Any] | None
     """Pretraining metrics (None when resuming: the checkpoint already holds the result)."""
+    labelled: tuple[np.ndarray, np.ndarray] | None = None
+    """DAgger's aggregate beyond the demos (observations, expert actions), kept for `--resume`."""
 
     def record(self, run_dir: Path, logger) -> None:
-        """After the run directory exists: keep generated demos for `--resume`, and log the
-        pretraining at step 0."""
+        """After the run directory exists: keep generated demos and DAgger's labels for
+        `--resume`, and log the pretraining."""
         if self.generated and not (run_dir / DEMOS_FILE).exists():
             demo_io.save(self.demos, run_dir / DEMOS_FILE)
+        if self.labelled is not None and not (run_dir / DAGGER_FILE).exists():
+            obs, act = self.labelled
+            atomic_write(run_dir / DAGGER_FILE, lambda f: np.savez_compressed(f, observations=obs, actions=act))
         if self.metrics is not None:
-            logger.log(0, self.metrics)
+            logger.log(int(self.metrics["expert_steps"]), self.metrics)
 
 
 def prepare_warm_start(
     cur: ResolvedCurriculum, agent: PPOAgent, run_dir: Path, seed: int, resumed: bool, progress: bool
 ) -> WarmStart | None:
-    """Load or generate the demos and apply them to `agent`; writes no file. Bad demos (wrong
-    stage or observation size, no successful episode) are a `SpecError` at `warm_start.*`."""
+    """Load or generate the demos and apply them to `agent` (see the module doc); writes no file.
+    Bad demos (wrong stage or observation size, no successful episode) are a `SpecError` at
+    `warm_start.*`."""
     ws = cur.spec.warm_start
     if ws is None:
         return None
-    file = cur.file
-    phase = cur.phases[ws.phase]
-    saved = run_dir / DEMOS_FILE
-    generated = ws.demos is None
-    if not generated:
-        try:
-            demos = demo_io.load(cur.demos_file)
-        except SpecError as exc:
-            raise SpecError.single(file, "warm_start.demos", "; ".join(str(i) for i in exc.issues)) from None
-        recorded = demos.metadata.get("stage")
-        if ws.stage is not None and recorded != ws.stage:
-            raise SpecError.single(file, "warm_start.stage", f"'{ws.stage}', but {cur.demos_file} holds demos of stage '{recorded}'")
-    elif resumed and saved.is_file():
-        demos = demo_io.load(saved)
-    else:
-        stage = ws.stage or phase.stages[-1]
-        demos = demo_io.generate(phase.task_file, stage, ws.generate_episodes, seed=seed, split="train", progress=progress)
-        if demos.num_steps == 0:
-            raise SpecError.single(
-                file, "warm_start.generate_episodes",
-                f"no scripted episode of stage '{stage}' succeeded out of {ws.generate_episodes}; no demos to learn from",
-            )
+    demos, generated = _demonstrations(cur, ws, run_dir, seed, resumed, progress)
     size = agent.obs_normalizer.rms.mean.shape[0]
     if demos.observations.shape[1] != size:
         where = "warm_start.demos" if ws.demos else "warm_start.phase"
-        raise SpecError.single(file, where, f"demo observations have {demos.observations.shape[1]} floats; the policy reads {size}")
+        raise SpecError.single(cur.file, where, f"demo observations have {demos.observations.shape[1]} floats; the policy reads {size}")
 
-    metrics = None
-    if not resumed:
-        rewards = scaled_rewards(agent, demos.rewards, demos.episode_starts, demos.terminated)
-        targets = returns_to_go(rewards, demos.episode_starts, demos.truncated, agent.spec.ppo.gamma)
-        metrics = pretrain(
-            agent, demos.observations, demos.actions, targets, epochs=ws.bc_epochs, batch_size=ws.bc_batch_size,
-            learning_rate=ws.bc_learning_rate, privileged=demos.privileged,
-        )
-        metrics["bc_demo_episodes"] = float(demos.num_episodes)
+    if resumed:  # the checkpoint holds the pretrained networks; only the BC term is not saved in it
+        labelled = _load_labelled(run_dir / DAGGER_FILE)
+        observations, actions = _aggregate(demos, labelled)
+        if ws.regularizer.weight > 0:
+            agent.set_demo_regularizer(observations, actions, ws.regularizer.weight, ws.regularizer.decay)
+        return WarmStart(demos, generated, None, labelled)
+
+    # 2. behaviour cloning (actor) and value regression (critic) on the demos
+    rewards = scaled_rewards(agent, demos.rewards, demos.episode_starts, demos.terminated)
+    targets = returns_to_go(rewards, demos.episode_starts, demos.truncated, agent.spec.ppo.gamma)
+    metrics = pretrain(
+        agent, demos.observations, demos.actions, targets, epochs=ws.bc_epochs, batch_size=ws.bc_batch_size,
+        learning_rate=ws.bc_learning_rate, privileged=demos.privileged,
+    )
+    metrics["bc_demo_episodes"] = float(demos.num_episodes)
+    std = _set_exploration(agent, ws, demos.observations, demos.actions)
+
+    # 3. DAgger: the student's own states, labelled by the expert
+    expert_steps = int(demos.metadata.get("steps_run", demos.num_steps))
+    observations, actions = demos.observations, demos.actions
+    labelled = None
+    if ws.dagger.rounds > 0:
+        observations, actions = _run_dagger(cur, ws, agent, demos, seed, progress)
+        labelled = (observations[demos.num_steps :], actions[demos.num_steps :])
+        expert_steps += len(labelled[0])
+        std = _set_exploration(agent, ws, observations, actions)
+        metrics["dagger_samples"] = float(len(labelled[0]))
+
+    # 4. the hand-over to PPO
+    ppo = agent.spec.ppo
+    agent.warm_up_critic(math.ceil(ws.fine_tune.critic_warmup_steps / (ppo.num_envs * ppo.rollout_steps)))
+    if ws.fine_tune.freeze_observation_statistics:
+        agent.freeze_observation_statistics()
     if ws.regularizer.weight > 0:
-        agent.set_demo_regularizer(demos.observations, demos.actions, ws.regularizer.weight, ws.regularizer.decay)
-    return WarmStart(demos, generated, metrics)
+        agent.set_demo_regularizer(observations, actions, ws.regularizer.weight, ws.regularizer.decay)
+    agent.global_step += expert_steps  # the expert's and the student's steps count in the budget
+    metrics["expert_steps"] = float(expert_steps)
+    metrics.update({f"exploration_std/{i}": float(s) for i, s in enumerate(std)})
+    return WarmStart(demos, generated, metrics, labelled)
+
+
+def _demonstrations(
+    cur: ResolvedCurriculum, ws: WarmStartSpec, run_dir: Path, seed: int, resumed: bool, progress: bool
+) -> tuple[demo_io.Demos, bool]:
+    """The demos file, the demos a resumed run saved, or newly recorded scripted episodes."""
+    saved = run_dir / DEMOS_FILE
+    if ws.demos is not None:
+        try:
+            demos = demo_io.load(cur.demos_file)
+        except SpecError as exc:
+            raise SpecError.single(cur.file, "warm_start.demos", "; ".join(str(i) for i in exc.issues)) from None
+        recorded = demos.metadata.get("stage")
+        if ws.stage is not None and recorded != ws.stage:
+            raise SpecError.single(cur.file, "warm_start.stage", f"'{ws.stage}', but {cur.demos_file} holds demos of stage '{recorded}'")
+        return demos, False
+    if resumed and saved.is_file():
+        return demo_io.load(saved), True
+    phase = cur.phases[ws.phase]
+    stage = ws.stage or phase.stages[-1]
+    demos = demo_io.generate(phase.task_file, stage, ws.generate_episodes, seed=seed, split="train", progress=progress)
+    if demos.num_steps == 0:
+        raise SpecError.single(
+            cur.file, "warm_start.generate_episodes",
+            f"no scripted episode of stage '{stage}' succeeded out of {ws.generate_episodes}; no demos to learn from",
+        )
+    return demos, True
+
+
+def _set_exploration(agent: PPOAgent, ws: WarmStartSpec, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """PPO's starting std (`fine_tune.exploration_std`); returns it per action dimension."""
+    ft = ws.fine_tune
+    if ft.exploration_std == "auto":
+        return fit_exploration_std(agent, observations, actions, ft.std_scale, ft.std_min, ft.std_max)
+    if ft.exploration_std != "preset":
+        agent.policy.actor_logstd.data.fill_(math.log(float(ft.exploration_std)))
+    return agent.policy.actor_logstd.detach().exp().numpy()
+
+
+def _labelled_env(phase, stage: str, privileged: bool) -> ExpertLabels:
+    """One DAgger worker env: the warm-start stage on the train goals, labelled by the expert."""
+    return ExpertLabels(TaskEnv(phase.task, phase.task_file, stage=stage, split="train", privileged=privileged), stage)
+
+
+def _run_dagger(
+    cur: ResolvedCurriculum, ws: WarmStartSpec, agent: PPOAgent, demos: demo_io.Demos, seed: int, progress: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    phase = cur.phases[ws.phase]
+    stage = ws.stage or demos.metadata.get("stage") or phase.stages[-1]
+    fn = partial(_labelled_env, phase, stage, agent.privileged_dim > 0)
+    envs = make_vector_env([fn] * agent.spec.ppo.num_envs, agent.spec.runtime)
+
+    def refit(observations: np.ndarray, actions: np.ndarray) -> dict[str, float]:
+        metrics = pretrain(
+            agent, observations, actions, epochs=ws.dagger.epochs, batch_size=ws.bc_batch_size,
+            learning_rate=ws.bc_learning_rate, update_normalizer=False,
+        )
+        _set_exploration(agent, ws, observations, actions)  # the next round explores as PPO will
+        return metrics
+
+    def report(k: int, batch: DaggerRound, metrics: dict[str, float]) -> None:
+        if progress:
+            rate = "-" if batch.success_rate is None else f"{batch.success_rate:.2f}"
+            print(
+                f"DAgger round {k}/{ws.dagger.rounds}: student success {rate} over {len(batch.episode_successes)} episodes, "
+                f"{len(batch.observations):,} states labelled, action MSE after refit {metrics['bc_action_mse']:.4f}",
+                file=sys.stderr,
+            )
+
+    try:
+        return dagger(agent, envs, demos.observations, demos.actions, ws.dagger.rounds, ws.dagger.steps_per_round, refit, seed, report)
+    finally:
+        envs.close()
+
+
+def _load_labelled(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as data:
+        return data["observations"], data["actions"]
+
+
+def _aggregate(demos: demo_io.Demos, labelled: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+    if labelled is None:
+        return demos.observations, demos.actions
+    return np.concatenate([demos.observations, labelled[0]]), np.concatenate([demos.actions, labelled[1]])
