@@ -29,7 +29,7 @@ def noiseless_pick_place(tmp_path):
     """pick-place without observation noise: the agent's observation is then exactly what
     Meta-World's own policy reads, so a label can be recomputed from the observation alone."""
     path = tmp_path / "pick_place_clean.yaml"
-    path.write_text(yaml.safe_dump({"base": str(PICK_PLACE), "name": "clean", "randomization": {"observation_noise": None}}))
+    path.write_text(yaml.safe_dump({"base": str(PICK_PLACE), "name": "clean", "randomization": {"observation_noise": {"per_step": None, "per_episode": None}}}))
     return path
 
 

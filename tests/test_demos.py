@@ -28,7 +28,7 @@ from tests.conftest import PICK_PLACE, TASKS
 def test_metaworld_policy_places_under_randomisation_with_the_goal_hidden():
     """Meta-World's pick-place policy reads the true goal from the backend, not the agent's
     observation (goal zeroed, noise added), and succeeds on several seeds."""
-    env = taskforge.make(PICK_PLACE, stage="place")
+    env = taskforge.make(PICK_PLACE.with_name("pick_place_meta.yaml"), stage="place")  # the hidden-goal variant
     policy = scripted_policy(env)
     assert isinstance(policy, MetaWorldPolicy) and list(policy.policies) == ["pick-place-v3"]
     demos = record(env, policy, episodes=3, seed=7, keep_failed=True)

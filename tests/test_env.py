@@ -60,9 +60,9 @@ def test_same_seed_same_trajectory_and_different_seed_differs():
 
 
 def test_hidden_and_observable_goal_differ_only_in_goal_slice(pick_place_doc):
-    observable = copy.deepcopy(pick_place_doc)
-    observable["goals"]["observable"] = True
-    envs = [env_from(pick_place_doc, stage="pick", seed=5), env_from(observable, stage="pick", seed=5)]
+    hidden, observable = copy.deepcopy(pick_place_doc), copy.deepcopy(pick_place_doc)
+    hidden["goals"]["observable"], observable["goals"]["observable"] = False, True
+    envs = [env_from(hidden, stage="pick", seed=5), env_from(observable, stage="pick", seed=5)]
     obs = [e.reset()[0] for e in envs]
     action = np.array([0.3, -0.2, 0.1, 0.5], dtype=np.float32)
     for _ in range(5):

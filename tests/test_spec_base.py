@@ -81,12 +81,22 @@ def test_shipped_xarm7_variants_differ_from_their_base_only_where_they_say(varia
     assert spec.name != base.name
 
 
-def test_meta_pick_place_is_pick_place_with_the_puck_drawn_per_trial():
-    base = load_task_spec(PICK_PLACE)
-    meta = load_task_spec(ROOT / "tasks/metaworld/pick_place_meta.yaml")
+@pytest.mark.parametrize("base_file, meta_file", [
+    ("tasks/metaworld/pick_place.yaml", "tasks/metaworld/pick_place_meta.yaml"),
+    ("tasks/metaworld/reach.yaml", "tasks/metaworld/reach_meta.yaml"),
+    ("tasks/metaworld/push.yaml", "tasks/metaworld/push_meta.yaml"),
+    ("tasks/xarm7/pick_place.yaml", "tasks/xarm7/pick_place_meta.yaml"),
+])
+def test_meta_variants_hide_the_goal_and_draw_the_object_per_trial_and_nothing_else(base_file, meta_file):
+    """The PPO files observe the goal; their RL² variants hide it and draw the object per trial
+    (so the object's start does not name the goal), and are otherwise the same task."""
+    base = load_task_spec(ROOT / base_file)
+    meta = load_task_spec(ROOT / meta_file)
+    assert base.goals.observable and not meta.goals.observable
     assert meta.randomization.object_start == "random" and base.randomization.object_start == "goal_set"
-    assert meta.stages == base.stages and meta.goals == base.goals and meta.backend == base.backend
-    assert meta.randomization.physics == base.randomization.physics
+    assert meta.stages == base.stages and meta.backend == base.backend
+    assert meta.goals.model_copy(update={"observable": True}) == base.goals
+    assert meta.randomization.model_copy(update={"object_start": "goal_set"}) == base.randomization
 
 
 @pytest.mark.parametrize("base_value,fragment", [
@@ -147,7 +157,7 @@ def test_curriculum_variant_in_another_folder_keeps_its_base_files(tmp_path, cap
 
     demos = _write(tmp_path / "curricula/with_demos.yaml", {
         "base": str(ROOT / "curricula/pick_place.yaml"),
-        "warm_start": {"demos": "../demos/pp.npz", "phase": 0, "stage": "reach"},
+        "warm_start": {"generate_episodes": None, "demos": "../demos/pp.npz", "phase": 0, "stage": "reach"},
     })
     deeper = _write(tmp_path / "curricula/variants/v.yaml", {"base": "../with_demos.yaml", "seed": 3})
     demos_path = load_curriculum_spec(deeper).warm_start.demos

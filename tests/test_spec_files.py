@@ -14,13 +14,46 @@ SHIPPED = sorted(
 )
 
 
+MEMORYLESS_BASELINES = {"benchmarks/configs/ml1_push_ppo.yaml", "benchmarks/configs/ml1_reach_ppo.yaml"}
+"""PPO on a hidden goal on purpose: the baselines RL² is measured against."""
+
+
 @pytest.mark.parametrize("relpath", SHIPPED)
 def test_shipped_file_validates(relpath, capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
     assert main(["validate", relpath]) == 0
     out = capsys.readouterr()
     assert f"{relpath}: ok" in out.out
-    assert out.err == ""
+    if relpath in MEMORYLESS_BASELINES:
+        [line] = out.err.splitlines()
+        assert line.startswith(f"warning: {relpath}: phases[0] stage ") and "goals.observable is false" in line
+    else:
+        assert out.err == ""  # every PPO curriculum shipped observes the goal
+
+
+def _hidden_goal_curriculum(tmp_path, agent: str, task: str) -> str:
+    path = tmp_path / "c.yaml"
+    path.write_text(f"name: c\nagent: {ROOT / agent}\ntotal_steps: 1000\nphases:\n  - task: {ROOT / task}\n")
+    return str(path)
+
+
+def test_a_memoryless_agent_on_a_hidden_goal_stage_is_warned_once_per_stage(tmp_path, capsys):
+    cur = _hidden_goal_curriculum(tmp_path, "agents/ppo.yaml", "tasks/metaworld/pick_place_meta.yaml")
+    assert main(["validate", cur]) == 0  # legal: a warning, not an error
+    lines = capsys.readouterr().err.splitlines()
+    # reach and pick succeed near the object wherever the goal is; push and place need the goal
+    assert [line.split(" stage ")[1].split(" ")[0] for line in lines] == ["'push'", "'place'"]
+    assert all(line.startswith(f"warning: {cur}: phases[0]") and "pick_place_meta.yaml" in line for line in lines)
+    assert "object_to_goal_distance" in lines[0] and "algo: rl2" in lines[0]
+
+
+@pytest.mark.parametrize("agent, task", [
+    ("agents/rl2.yaml", "tasks/metaworld/pick_place_meta.yaml"),  # RL² infers the goal from the reward
+    ("agents/ppo.yaml", "tasks/metaworld/pick_place.yaml"),  # the goal is observed
+])
+def test_no_hidden_goal_warning_where_the_agent_can_know_the_goal(agent, task, tmp_path, capsys):
+    assert main(["validate", _hidden_goal_curriculum(tmp_path, agent, task)]) == 0
+    assert "warning" not in capsys.readouterr().err
 
 
 def test_pick_place_summary_names_every_stage_term_and_range(capsys, monkeypatch):
@@ -29,10 +62,10 @@ def test_pick_place_summary_names_every_stage_term_and_range(capsys, monkeypatch
     out = capsys.readouterr().out
     for text in ("backend metaworld", "pick-place-v3", "1. reach", "2. push", "3. pick", "4. place",
                  "+1*tcp_to_object", "object_to_goal_distance < 0.07", "body_mass: scale by uniform[0.5, 1.5]",
-                 "dof_damping: scale by loguniform[0.3, 3]", "gravity: add by N(0, 0.4)", "goals hidden", "test (held out) 50"):
+                 "dof_damping: scale by loguniform[0.3, 3]", "gravity: add by N(0, 0.4)", "goals observable", "test (held out) 50"):
         assert text in out, text
     assert "object start" not in out  # ML1's own placement: nothing to say
-    assert main(["validate", "tasks/metaworld/reach.yaml"]) == 0
+    assert main(["validate", "tasks/metaworld/reach_meta.yaml"]) == 0
     assert "object start: random per task instance" in capsys.readouterr().out
 
 

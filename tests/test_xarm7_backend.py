@@ -101,9 +101,13 @@ def test_spaces_timing_and_observation_layout():
     np.testing.assert_allclose(obs[11:14], f["goal_pos"])
     np.testing.assert_allclose(obs[14:21], m.key("home").qpos[:7], atol=2e-3)
     np.testing.assert_allclose(d.mocap_pos[0], f["goal_pos"])  # the marker shows the goal
-    # The env hides the goal (goals.observable: false) and nothing else.
-    hidden, _ = env.reset(seed=3, options={"goal_index": 0})
+    # pick_place.yaml observes the goal (PPO); its RL² variant hides it, and nothing else.
+    shown, _ = env.reset(seed=3, options={"goal_index": 0})
+    np.testing.assert_allclose(shown[GOAL_SLICE], env.unwrapped.features()["goal_pos"], atol=0.02)  # plus noise
+    meta = taskforge.make(PICK_PLACE.with_name("pick_place_meta.yaml"), seed=0)
+    hidden, _ = meta.reset(seed=3, options={"goal_index": 0})
     assert np.all(hidden[GOAL_SLICE] == 0.0)
+    meta.close()
 
 
 def test_timing_from_substeps(tmp_path):
