@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -75,3 +76,32 @@ def advance_run(curriculum: Path, run_dir: Path, seed: int, total: int, chunk: i
         train(curriculum, run_dir=run_dir, seed=seed, steps=total, stop_at=done + chunk, resume=ckpt.exists(), progress=False)
         done = load_checkpoint(ckpt)["agent"]["global_step"]
     return done
+
+
+def chunked_parser(doc: str, chunk_steps: int) -> argparse.ArgumentParser:
+    """The arguments every resumable comparison takes: which seeds, how far to advance each run
+    in this call, and a report of what exists without training."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--chunk-steps", type=int, default=chunk_steps, help="advance each run by at most this many env steps per call")
+    parser.add_argument("--report-only", action="store_true", help="summarise the runs so far, train nothing")
+    return parser
+
+
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (files only, no display)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, out: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

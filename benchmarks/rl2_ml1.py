@@ -24,7 +24,6 @@ a 256-unit GRU and PPO (appendix Table 10), for far more env steps than fit here
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -34,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import RESULTS, advance_run, print_table, write_result  # noqa: E402
+from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
 from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
 from taskforge.training.metrics import read_jsonl  # noqa: E402
@@ -115,10 +114,7 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     """Left: meta-test success at episode 1 (dashed) and episode K (solid) of a trial vs env steps,
     mean over seeds. Right: the adaptation curve (success at episode 1..K on held-out goals) at
     each variant's last evaluation that every one of its seeds reached."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, (ax, ax_adapt) = plt.subplots(1, 2, figsize=(11, 4), width_ratios=[3, 2])
     for colour, variant in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"], VARIANTS):
@@ -146,20 +142,14 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     ax_adapt.set_ylim(-0.02, 1.02)
     ax_adapt.legend(fontsize=7)
     ax_adapt.set_title("adaptation curve (mean over seeds)")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = chunked_parser(__doc__, chunk_steps=500_000)
     parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--steps", type=int, default=2_000_000)
-    parser.add_argument("--chunk-steps", type=int, default=500_000)
     parser.add_argument("--trials", type=int, default=50, help="trials per split per evaluation (goal k for trial k)")
-    parser.add_argument("--report-only", action="store_true", help="summarise the runs so far, train nothing")
     args = parser.parse_args()
 
     runs = {}

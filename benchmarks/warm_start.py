@@ -18,7 +18,6 @@ pretraining more than 0.10 below the one at the end of pretraining.
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -27,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import RESULTS, advance_run, print_table, write_result  # noqa: E402
+from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.envs import load_curriculum  # noqa: E402
 from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
 from taskforge.training.metrics import read_jsonl  # noqa: E402
@@ -70,10 +69,7 @@ def summarise(variant: str, seed: int, run_dir: Path) -> dict:
 
 
 def plot_curves(runs: list[dict], out: Path) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     backends = sorted({r["variant"].split("-")[0] for r in runs})
     fig, axes = plt.subplots(1, len(backends), figsize=(6.5 * len(backends), 4.2), squeeze=False)
@@ -94,18 +90,12 @@ def plot_curves(runs: list[dict], out: Path) -> Path:
         ax.set_ylim(-0.02, 1.02)
         ax.legend(loc="center right", fontsize=8)
     axes[0][0].set_ylabel("success on 50 held-out goals")
-    fig.tight_layout()
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
-    return out
+    return save_figure(fig, out)
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = chunked_parser(__doc__, chunk_steps=10**9)
     parser.add_argument("--variants", nargs="+", default=list(VARIANTS), choices=list(VARIANTS))
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    parser.add_argument("--chunk-steps", type=int, default=10**9, help="advance each run by at most this many steps per call")
-    parser.add_argument("--report-only", action="store_true", help="summarise the runs so far, train nothing")
     args = parser.parse_args()
 
     for variant in args.variants if not args.report_only else []:
