@@ -88,6 +88,7 @@ def plot_curves(runs: list[dict], out: Path) -> Path:
         ax.set_title(f"{backend} pick-place: held-out place success")
         ax.set_xlabel("env steps (expert and DAgger steps included)")
         ax.set_ylim(-0.02, 1.02)
+        ax.set_xlim(left=0)  # a warm-started curve starts where its expert steps put it
         ax.legend(loc="center right", fontsize=8)
     axes[0][0].set_ylabel("success on 50 held-out goals")
     return save_figure(fig, out)

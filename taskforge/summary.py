@@ -74,7 +74,9 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     lines = [
         f"curriculum {spec.name}: {spec.total_steps:,} steps, seed {spec.seed}, agent {cur.agent.name} ({cur.agent_file})",
         f"  promote at success >= {spec.promotion.threshold:g} over {spec.promotion.window} episodes "
-        f"(min {spec.promotion.min_steps:,} steps); replay {spec.replay.fraction:g}; "
+        f"(min {spec.promotion.min_steps:,} steps"
+        + (f", or after {spec.promotion.max_steps:,} steps in a stage" if spec.promotion.max_steps else "")
+        + f"); replay {spec.replay.fraction:g}; "
         f"demotion {'on' if spec.demotion.enabled else 'off'}; sub-task sampling {spec.sampling.mode}",
     ]
     for i, phase in enumerate(cur.phases):
@@ -98,8 +100,13 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     if ws is not None:
         phase = cur.phases[ws.phase]
         source = str(cur.demos_file) if ws.demos else f"{ws.generate_episodes} scripted episodes of {phase.task.name}:{ws.stage or phase.stages[-1]}"
+        ft = ws.fine_tune
+        std = ft.exploration_std if isinstance(ft.exploration_std, str) else f"{ft.exploration_std:g}"
         lines.append(
-            f"  warm start from {source}: BC {ws.bc_epochs} epochs, then BC term "
-            f"{ws.regularizer.weight:g} x {ws.regularizer.decay:g}^update"
+            f"  warm start from {source}: BC {ws.bc_epochs} epochs"
+            + (f", {ws.dagger.rounds} DAgger rounds of {ws.dagger.steps_per_round:,} steps" if ws.dagger.rounds else "")
+            + f"; PPO std {std}, {ft.critic_warmup_steps:,} critic-only steps, "
+            f"observation statistics {'frozen' if ft.freeze_observation_statistics else 'updating'}, "
+            f"BC term {ws.regularizer.weight:g} x {ws.regularizer.decay:g}^update"
         )
     return lines

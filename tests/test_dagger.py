@@ -138,3 +138,13 @@ def test_a_warm_started_run_keeps_its_success_when_ppo_takes_over(tmp_path):
     assert first["eval_success_rate"] >= 0.8, evals
     assert len(evals) >= 4 and min(evals[1:]) >= first["eval_success_rate"] - 0.1, evals
     assert [r["actor_trained"] for r in records if "actor_trained" in r][:3] == [0.0, 0.0, 1.0]
+
+    # DAgger's labels are kept, so a resumed run reinstalls the BC term on demos + labels, and
+    # neither pretrains again nor restarts the critic warm-up
+    with np.load(run / "dagger.npz") as labelled:
+        assert labelled["observations"].shape == (1_200, 39) and labelled["actions"].shape == (1_200, 4)
+    end = records[-1]["step"]
+    train(cur, run_dir=run, steps=end + 1_200, resume=True, progress=False)
+    resumed = [r for r in read_jsonl(run / "metrics.jsonl") if r["step"] > end]
+    assert resumed and all(r["actor_trained"] == 1.0 and r["bc_weight"] > 0 for r in resumed if "actor_trained" in r)
+    assert sum("expert_steps" in r for r in read_jsonl(run / "metrics.jsonl")) == 1

@@ -230,20 +230,21 @@ def _final_evaluation(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: Curri
     policy on the final stage (`evaluation.stage`, else the phase's last), written to
     `final_eval.json` for `taskforge train` to print."""
     phase = cur.phases[scheduler.phase]
-    ev = cur.spec.evaluation
-    stage = ev.stage or phase.stages[-1]
+    stage = cur.spec.evaluation.stage or phase.stages[-1]
     if last_eval is not None and last_eval[0] == agent.global_step and last_eval[1].stage == stage:
         result = last_eval[1]  # the periodic evaluation already ran on this very policy
     else:
-        result = evaluate(agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=seed + 10_000,
-                          stop_on_success=ev.stop_on_success)
+        result = _evaluate_stage(agent, cur, scheduler.phase, stage, seed)
     save_json({"step": agent.global_step, **result.as_dict()}, run_dir / FINAL_EVAL)
 
 
 def _evaluate_current(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: CurriculumScheduler, seed: int):
-    phase = cur.phases[scheduler.phase]
-    ev = cur.spec.evaluation
-    stage = ev.stage or scheduler.stage
+    return _evaluate_stage(agent, cur, scheduler.phase, cur.spec.evaluation.stage or scheduler.stage, seed)
+
+
+def _evaluate_stage(agent: PPOAgent, cur: ResolvedCurriculum, phase_index: int, stage: str, seed: int):
+    """The curriculum's `evaluation` settings on one stage of a phase; seeded apart from training."""
+    phase, ev = cur.phases[phase_index], cur.spec.evaluation
     return evaluate(agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=seed + 10_000, stop_on_success=ev.stop_on_success)
 
 
