@@ -70,7 +70,9 @@ def advance_run(curriculum: Path, run_dir: Path, seed: int, total: int, chunk: i
     from taskforge.training.checkpoint import load_checkpoint
 
     ckpt = run_dir / "checkpoint.pt"
-    done = load_checkpoint(ckpt)["agent"]["global_step"] if ckpt.exists() else 0
+    done = load_checkpoint(ckpt)["agent"]["global_step"] if ckpt.exists() else steps_logged(run_dir)
+    if done >= total and not ckpt.exists():
+        return done  # finished, and committed without its checkpoint
     if done < total:
         # the run's length is `total` (the learning-rate schedule spans it); the chunk only pauses it
         train(curriculum, run_dir=run_dir, seed=seed, steps=total, stop_at=done + chunk, resume=ckpt.exists(), progress=False)
@@ -105,3 +107,12 @@ def save_figure(fig, out: Path) -> Path:
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def steps_logged(run_dir: Path) -> int:
+    """The step of a run's last metrics record (0 when it has none): how far a run got, also when
+    it was committed finished, with its metrics but without its checkpoint."""
+    from taskforge.training.metrics import read_jsonl
+
+    records = read_jsonl(run_dir / "metrics.jsonl")
+    return int(records[-1]["step"]) if records else 0

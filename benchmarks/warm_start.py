@@ -26,9 +26,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
+from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, steps_logged, write_result  # noqa: E402
 from taskforge.envs import load_curriculum  # noqa: E402
-from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
 from taskforge.training.metrics import read_jsonl  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -56,7 +55,7 @@ def summarise(variant: str, seed: int, run_dir: Path) -> dict:
     return {
         "variant": variant,
         "seed": seed,
-        "steps_done": load_checkpoint(run_dir / "checkpoint.pt")["agent"]["global_step"],
+        "steps_done": steps_logged(run_dir),
         "expert_steps": int(warm[0]["expert_steps"]) if warm else 0,
         "eval_after_pretraining": start,
         "worst_drop_after_pretraining": None if start is None or not later else round(start - min(later), 4),
@@ -109,7 +108,7 @@ def main() -> None:
     runs = [
         summarise(variant, seed, RUNS / f"{variant}-seed{seed}")
         for variant in VARIANTS for seed in args.seeds
-        if (RUNS / f"{variant}-seed{seed}" / "checkpoint.pt").exists()
+        if (RUNS / f"{variant}-seed{seed}" / "metrics.jsonl").exists()
     ]
     rows = []
     for r in runs:
