@@ -81,8 +81,9 @@ def ppo_loss(policy: ActorCritic, mb: Minibatch, ppo: PPOSpec, generator: torch.
         v_loss = 0.5 * ((newvalue - mb.returns) ** 2).mean()
 
     entropy_loss = entropy.mean()
-    loss = pg_loss - ppo.ent_coef * entropy_loss + ppo.vf_coef * v_loss  # overall loss with entropy bonus (detail #10)
-    if not train_actor:
+    if train_actor:  # overall loss with entropy bonus (detail #10)
+        loss = pg_loss - ppo.ent_coef * entropy_loss + ppo.vf_coef * v_loss
+    else:  # critic warm-up: the actor gets no gradient
         loss = ppo.vf_coef * v_loss
     return PPOLoss(
         total=loss,

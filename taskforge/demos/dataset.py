@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from taskforge.atomic import atomic_write
-from taskforge.demos.policies import ScriptedPolicy, Source, scripted_policy
+from taskforge.demos.policies import ScriptedPolicy, Source, act_in_box, scripted_policy
 from taskforge.envs import TaskEnv, make
 from taskforge.spec import SpecError
 
@@ -90,7 +90,6 @@ def record(
     stage = env.stage
     policy = policy or scripted_policy(env, stage)
     num_goals = env.backend.num_goals(env.split)
-    low, high = env.action_space.low, env.action_space.high
     steps: dict[str, list] = {k: [] for k in (*STEP_KEYS, "privileged")}
     kept: dict[str, list] = {k: [] for k in EPISODE_KEYS}
     successes = 0
@@ -102,7 +101,7 @@ def record(
         policy.reset(env)
         episode: dict[str, list] = {key: [] for key in steps}
         while True:
-            action = np.clip(np.asarray(policy(env), dtype=np.float32), low, high)
+            action = act_in_box(policy, env)
             episode["observations"].append(obs)
             episode["privileged"].append(info.get("privileged"))
             obs, reward, terminated, truncated, info = env.step(action)

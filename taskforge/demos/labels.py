@@ -15,7 +15,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 
-from taskforge.demos.policies import ScriptedPolicy, Source, scripted_policy
+from taskforge.demos.policies import ScriptedPolicy, Source, act_in_box, scripted_policy
 from taskforge.envs import TaskEnv
 
 EXPERT_ACTION = "expert_action"
@@ -35,14 +35,10 @@ class ExpertLabels(gymnasium.Wrapper):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         obs, info = self.env.reset(seed=seed, options=options)
         self.policy.reset(self.task_env)
-        info[EXPERT_ACTION] = self._label()
+        info[EXPERT_ACTION] = act_in_box(self.policy, self.task_env)
         return obs, info
 
     def step(self, action: np.ndarray):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        info[EXPERT_ACTION] = self._label()
+        info[EXPERT_ACTION] = act_in_box(self.policy, self.task_env)
         return obs, reward, terminated, truncated, info
-
-    def _label(self) -> np.ndarray:
-        space = self.task_env.action_space
-        return np.clip(np.asarray(self.policy(self.task_env), dtype=np.float32), space.low, space.high)

@@ -203,6 +203,13 @@ class WaypointPlanner:
         return start, c.grip_close  # down behind it
 
 
+def act_in_box(policy: ScriptedPolicy, env: TaskEnv) -> np.ndarray:
+    """The scripted action clipped to the env's action box: what the agent could have chosen, so
+    what demonstrations record and DAgger labels."""
+    space = env.action_space
+    return np.clip(np.asarray(policy(env), dtype=np.float32), space.low, space.high)
+
+
 def _xy_dist(a: np.ndarray, b: np.ndarray) -> float:
     return math.hypot(float(a[0] - b[0]), float(a[1] - b[1]))
 

@@ -90,7 +90,7 @@ def prepare_warm_start(
         learning_rate=ws.bc_learning_rate, privileged=demos.privileged,
     )
     metrics["bc_demo_episodes"] = float(demos.num_episodes)
-    std = _set_exploration(agent, ws, demos.observations, demos.actions)
+    _set_exploration(agent, ws, demos.observations, demos.actions)
 
     # 3. DAgger: the student's own states, labelled by the expert
     expert_steps = int(demos.metadata.get("steps_run", demos.num_steps))
@@ -99,8 +99,7 @@ def prepare_warm_start(
     if ws.dagger.rounds > 0:
         observations, actions = _run_dagger(cur, ws, agent, demos, seed, progress)
         labelled = (observations[demos.num_steps :], actions[demos.num_steps :])
-        expert_steps += len(labelled[0])
-        std = _set_exploration(agent, ws, observations, actions)
+        expert_steps += len(labelled[0])  # the last refit already sized the std on the whole aggregate
         metrics["dagger_samples"] = float(len(labelled[0]))
 
     # 4. the hand-over to PPO
@@ -112,6 +111,7 @@ def prepare_warm_start(
         agent.set_demo_regularizer(observations, actions, ws.regularizer.weight, ws.regularizer.decay)
     agent.global_step += expert_steps  # the expert's and the student's steps count in the budget
     metrics["expert_steps"] = float(expert_steps)
+    std = agent.policy.actor_logstd.detach().exp().numpy()
     metrics.update({f"exploration_std/{i}": float(s) for i, s in enumerate(std)})
     return WarmStart(demos, generated, metrics, labelled)
 
@@ -143,14 +143,13 @@ def _demonstrations(
     return demos, True
 
 
-def _set_exploration(agent: PPOAgent, ws: WarmStartSpec, observations: np.ndarray, actions: np.ndarray) -> np.ndarray:
-    """PPO's starting std (`fine_tune.exploration_std`); returns it per action dimension."""
+def _set_exploration(agent: PPOAgent, ws: WarmStartSpec, observations: np.ndarray, actions: np.ndarray) -> None:
+    """Set PPO's starting std (`fine_tune.exploration_std`) from the student on these data."""
     ft = ws.fine_tune
     if ft.exploration_std == "auto":
-        return fit_exploration_std(agent, observations, actions, ft.std_scale, ft.std_min, ft.std_max)
-    if ft.exploration_std != "preset":
+        fit_exploration_std(agent, observations, actions, ft.std_scale, ft.std_min, ft.std_max)
+    elif ft.exploration_std != "preset":
         agent.policy.actor_logstd.data.fill_(math.log(float(ft.exploration_std)))
-    return agent.policy.actor_logstd.detach().exp().numpy()
 
 
 def _labelled_env(phase, stage: str, privileged: bool) -> ExpertLabels:
