@@ -65,18 +65,17 @@ def print_table(headers: list[str], rows: list[list[Any]]) -> None:
 
 def advance_run(curriculum: Path, run_dir: Path, seed: int, total: int, chunk: int) -> int:
     """Train one benchmark run up to `chunk` more env steps (never past `total`), resuming from
-    its checkpoint; returns its step count. Long comparisons span sessions this way."""
+    its checkpoint; returns its step count. Long comparisons span sessions this way. A finished
+    run committed without its checkpoint (metrics only) is left as it is."""
+    from taskforge.run import RunDir
     from taskforge.training import train
-    from taskforge.training.checkpoint import load_checkpoint
 
-    ckpt = run_dir / "checkpoint.pt"
-    done = load_checkpoint(ckpt)["agent"]["global_step"] if ckpt.exists() else steps_logged(run_dir)
-    if done >= total and not ckpt.exists():
-        return done  # finished, and committed without its checkpoint
+    run = RunDir(run_dir)
+    done = run.steps_done()
     if done < total:
         # the run's length is `total` (the learning-rate schedule spans it); the chunk only pauses it
-        train(curriculum, run_dir=run_dir, seed=seed, steps=total, stop_at=done + chunk, resume=ckpt.exists(), progress=False)
-        done = load_checkpoint(ckpt)["agent"]["global_step"]
+        train(curriculum, run_dir=run_dir, seed=seed, steps=total, stop_at=done + chunk, resume=True, progress=False)
+        done = run.steps_done()
     return done
 
 
@@ -107,12 +106,3 @@ def save_figure(fig, out: Path) -> Path:
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
-
-
-def steps_logged(run_dir: Path) -> int:
-    """The step of a run's last metrics record (0 when it has none): how far a run got, also when
-    it was committed finished, with its metrics but without its checkpoint."""
-    from taskforge.training.metrics import read_jsonl
-
-    records = read_jsonl(run_dir / "metrics.jsonl")
-    return int(records[-1]["step"]) if records else 0

@@ -27,7 +27,7 @@ from benchmarks.common import RESULTS, print_table, versions, write_result  # no
 from taskforge.backends.gymnasium_env import TEST_SEED_OFFSET  # noqa: E402
 from taskforge.spec import load_agent_spec  # noqa: E402
 from taskforge.training import train  # noqa: E402
-from taskforge.training.metrics import read_jsonl  # noqa: E402
+from taskforge.run import RunDir  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CURRICULUM = ROOT / "curricula/lunar_lander.yaml"
@@ -39,9 +39,8 @@ RUNS = ROOT / "benchmarks/runs/lunar_lander"
 
 def run_taskforge(seed: int, steps: int) -> list[tuple[int, float]]:
     run_dir = RUNS / f"taskforge-seed{seed}"
-    resume = (run_dir / "checkpoint.pt").exists()
-    train(CURRICULUM, run_dir=run_dir, seed=seed, steps=steps, resume=resume, progress=False)
-    return [(m["step"], m["eval_return_mean"]) for m in read_jsonl(run_dir / "metrics.jsonl") if "eval_return_mean" in m]
+    train(CURRICULUM, run_dir=run_dir, seed=seed, steps=steps, resume=True, progress=False)  # afresh when new
+    return [(m["step"], m["eval_return_mean"]) for m in RunDir(run_dir).read_metrics() if "eval_return_mean" in m]
 
 
 def run_sb3(seed: int, steps: int) -> list[tuple[int, float]]:

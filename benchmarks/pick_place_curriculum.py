@@ -23,8 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.envs import load_curriculum  # noqa: E402
-from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
-from taskforge.training.metrics import read_jsonl  # noqa: E402
+from taskforge.run import RunDir  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {"curriculum": ROOT / "benchmarks/configs/pick_place_scratch.yaml", "flat": ROOT / "benchmarks/configs/pick_place_flat.yaml"}
@@ -76,19 +75,19 @@ def main() -> None:
     for seed in args.seeds:
         for variant in VARIANTS:
             run_dir = RUNS / f"{variant}-seed{seed}"
+            run = RunDir(run_dir)
             if args.report_only:
-                if not (run_dir / "checkpoint.pt").exists():
+                if not run.metrics.exists():
                     continue
-                step = load_checkpoint(run_dir / "checkpoint.pt")["agent"]["global_step"]
+                step = run.steps_done()
             else:
                 start = time.perf_counter()
                 step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
                 print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
-            metrics = read_jsonl(run_dir / "metrics.jsonl")
             runs[f"{variant}-seed{seed}"] = {
                 "variant": variant, "seed": seed, "steps_done": step,
-                "eval_place_success": [(m["step"], m["eval_success_rate"]) for m in metrics if "eval_success_rate" in m],
-                "promotions": [(e["step"], e["to_stage"]) for e in read_jsonl(run_dir / "events.jsonl")],
+                "eval_place_success": [(m["step"], m["eval_success_rate"]) for m in run.read_metrics() if "eval_success_rate" in m],
+                "promotions": run.stage_changes(),
             }
 
     buckets = sorted({s // 100_000 * 100_000 for r in runs.values() for s, _ in r["eval_place_success"]})

@@ -35,8 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
-from taskforge.training.checkpoint import load_checkpoint  # noqa: E402
-from taskforge.training.metrics import read_jsonl  # noqa: E402
+from taskforge.run import RunDir, read_jsonl  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {
@@ -63,7 +62,7 @@ def meta_evaluate(run_dir: Path, step: int, trials: int, sampled: bool) -> list[
     for split in ("train", "test"):
         if any(e["split"] == split for e in done):
             continue
-        report = evaluate_run(run_dir / "checkpoint.pt", split=split, trials=trials, trial_episodes=TRIAL_EPISODES,
+        report = evaluate_run(RunDir(run_dir).checkpoint, split=split, trials=trials, trial_episodes=TRIAL_EPISODES,
                               deterministic=not sampled)
         row = report["rows"][0]
         entry = {"step": step, "split": split, "trials": trials, "sampled": sampled, "success_rate": row["success_rate"],
@@ -156,18 +155,18 @@ def main() -> None:
     for variant in args.variants:
         for seed in args.seeds:
             run_dir = RUNS / f"{variant}-seed{seed}"
-            ckpt = run_dir / "checkpoint.pt"
+            run = RunDir(run_dir)
             if not args.report_only:
                 start = time.perf_counter()
                 step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
                 for sampled in (False, True):  # a finished run gets any evaluation it lacks
                     meta_evaluate(run_dir, step, args.trials, sampled)
                 print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
-            if not ckpt.exists():
+            if not run.metrics.exists():
                 continue
-            metrics = read_jsonl(run_dir / "metrics.jsonl")
+            metrics = run.read_metrics()
             runs[f"{variant}-seed{seed}"] = {
-                "variant": variant, "seed": seed, "steps_done": load_checkpoint(ckpt)["agent"]["global_step"],
+                "variant": variant, "seed": seed, "steps_done": run.steps_done(),
                 "evals": [e for e in read_jsonl(run_dir / "meta_evals.jsonl") if e["trials"] == args.trials],
                 "train_last_episode_success": [(m["step"], m["success_rate"]) for m in metrics if m.get("success_rate") is not None],
                 "steps_per_s": float(np.median([m["steps_per_s"] for m in metrics])),

@@ -26,9 +26,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, steps_logged, write_result  # noqa: E402
+from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.envs import load_curriculum  # noqa: E402
-from taskforge.training.metrics import read_jsonl  # noqa: E402
+from taskforge.run import RunDir  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "benchmarks/configs"
@@ -45,7 +45,8 @@ RUNS = ROOT / "benchmarks/runs/warm_start"
 
 def summarise(variant: str, seed: int, run_dir: Path) -> dict:
     """One run's evaluation curve and what the issue's goals ask of it."""
-    metrics = read_jsonl(run_dir / "metrics.jsonl")
+    run = RunDir(run_dir)
+    metrics = run.read_metrics()
     curve = [(m["step"], m["eval_success_rate"]) for m in metrics if "eval_success_rate" in m]
     warm = [m for m in metrics if "expert_steps" in m]
     target, budget = GOALS[variant.split("-")[0]]
@@ -55,7 +56,7 @@ def summarise(variant: str, seed: int, run_dir: Path) -> dict:
     return {
         "variant": variant,
         "seed": seed,
-        "steps_done": steps_logged(run_dir),
+        "steps_done": run.steps_done(),
         "expert_steps": int(warm[0]["expert_steps"]) if warm else 0,
         "eval_after_pretraining": start,
         "worst_drop_after_pretraining": None if start is None or not later else round(start - min(later), 4),
@@ -63,7 +64,7 @@ def summarise(variant: str, seed: int, run_dir: Path) -> dict:
         "best": max((v for _, v in curve), default=None),
         "first_step_at_goal": reached,
         "goal_met": reached is not None and reached <= budget,
-        "promotions": [(e["step"], e["to_stage"]) for e in read_jsonl(run_dir / "events.jsonl")],
+        "promotions": run.stage_changes(),
     }
 
 
@@ -108,7 +109,7 @@ def main() -> None:
     runs = [
         summarise(variant, seed, RUNS / f"{variant}-seed{seed}")
         for variant in VARIANTS for seed in args.seeds
-        if (RUNS / f"{variant}-seed{seed}" / "metrics.jsonl").exists()
+        if RunDir(RUNS / f"{variant}-seed{seed}").metrics.exists()
     ]
     rows = []
     for r in runs:

@@ -18,9 +18,23 @@ if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and ctypes.ut
     os.environ["MUJOCO_GL"] = "osmesa"
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
-from taskforge.envs import TaskEnv, load_curriculum, load_task, make  # noqa: E402
-from taskforge.spec import SpecError, load_agent_spec  # noqa: E402
-
 __version__ = "0.1.0"
 
 __all__ = ["SpecError", "TaskEnv", "load_agent_spec", "load_curriculum", "load_task", "make"]
+
+# The public names load on first use (PEP 562), so `import taskforge` costs nothing and the
+# command line can catch a Ctrl-C during the heavy imports (torch, MuJoCo) that follow.
+_PUBLIC = {"TaskEnv": "taskforge.envs", "load_curriculum": "taskforge.envs", "load_task": "taskforge.envs",
+           "make": "taskforge.envs", "SpecError": "taskforge.spec", "load_agent_spec": "taskforge.spec"}
+
+
+def __getattr__(name: str):
+    if name in _PUBLIC:
+        import importlib
+
+        return getattr(importlib.import_module(_PUBLIC[name]), name)
+    raise AttributeError(f"module 'taskforge' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_PUBLIC])

@@ -11,7 +11,6 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-import numpy as np
 
 from taskforge.spec import SpecError, SpecIssue, expected_one_of, read_yaml_with_base
 
@@ -82,7 +81,8 @@ def cmd_tasks(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     import json
 
-    from taskforge.training import CHECKPOINT, FINAL, FINAL_EVAL, Interrupted, load_checkpoint, train
+    from taskforge.run import RunDir, load_checkpoint
+    from taskforge.training import Interrupted, train
 
     if args.steps is not None and args.steps < 1:
         raise SpecError.single("--steps", "", f"expected a positive number of steps (got {args.steps})")
@@ -94,17 +94,18 @@ def cmd_train(args: argparse.Namespace) -> int:
     except Interrupted as exc:
         print(str(exc), file=sys.stderr)
         return 130
-    state = load_checkpoint(run_dir / CHECKPOINT)
+    run = RunDir(run_dir)
+    state = load_checkpoint(run.checkpoint)
     step, total = state["agent"]["global_step"], state["config"]["total_steps"]
     if step >= total:
-        print(f"done: {run_dir} (final policy {run_dir / FINAL})")
-        if (run_dir / FINAL_EVAL).is_file():
-            ev = json.loads((run_dir / FINAL_EVAL).read_text())
+        print(f"done: {run} (final policy {run.final})")
+        if run.final_eval.is_file():
+            ev = json.loads(run.final_eval.read_text())
             low, high = ev["success_ci95"]
             print(f"held-out success of '{ev['stage']}' ({ev['split']} split, {ev['episodes']} episodes): "
                   f"{ev['success_rate']:.2f} (95 % CI {low:.2f}-{high:.2f})")
     else:
-        print(f"paused at step {step:,} of {total:,}: {run_dir} (continue with --resume)")
+        print(f"paused at step {step:,} of {total:,}: {run} (continue with --resume)")
     return 0
 
 
@@ -136,7 +137,7 @@ def cmd_demos(args: argparse.Namespace) -> int:
 
 def cmd_eval(args: argparse.Namespace) -> int:
     from taskforge.evaluation.report import evaluate_run, format_table
-    from taskforge.training.checkpoint import save_json
+    from taskforge.run import save_json
 
     if args.episodes < 1:
         raise SpecError.single("--episodes", "", f"expected at least 1 trial (got {args.episodes})")
@@ -164,44 +165,15 @@ def cmd_plot(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from taskforge.envs import TaskEnv, load_task
-    from taskforge.rendering import render_episodes
+    from taskforge.rendering import policy_actor, render_episodes, scripted_actor
 
     target = Path(args.target)
-    if target.suffix in (".yaml", ".yml"):
-        from taskforge.demos import scripted_policy
-
-        env = TaskEnv(load_task(target), target, stage=args.stage, split=args.split)
-        policy = scripted_policy(env, args.stage)
-
-        def act(obs, start):
-            if start:
-                policy.reset(env)
-            return policy(env)
-
-        source = f"scripted ({policy.name})"
-    else:
-        from taskforge.evaluation.report import find_checkpoint, load_agent
-        from taskforge.spec import TaskSpec
-
-        from taskforge.agents import wrap_for_training
-
-        agent, config, _ = load_agent(find_checkpoint(target))
-        phase = config["phases"][0]
-        env = TaskEnv(TaskSpec.model_validate(phase["task"]), phase["task_file"], stage=args.stage or phase["stages"][-1],
-                      split=args.split, privileged=agent.privileged_dim > 0)
-        env = wrap_for_training(env, agent.spec)  # RL²: an "episode" is a whole trial
-        state = agent.initial_state(1)
-
-        def act(obs, start):
-            nonlocal state
-            action, state = agent.act(obs[None], state, np.array([start]), deterministic=True)
-            return action[0]
-
-        source = f"policy at step {agent.global_step:,}"
-    frames, successes = render_episodes(env, act, Path(args.out), episodes=args.episodes, seed=args.seed, camera=args.camera,
-                                        width=args.width, height=args.height, max_frames=args.max_frames)
-    print(f"wrote {args.out}: {frames} frames, {source}, stage {env.unwrapped.stage}, success {sum(successes)}/{len(successes)}")
+    actor = (scripted_actor(target, args.stage, args.split) if target.suffix in (".yaml", ".yml")
+             else policy_actor(target, args.stage, args.split))
+    frames, successes = render_episodes(actor.env, actor.act, Path(args.out), episodes=args.episodes, seed=args.seed,
+                                        camera=args.camera, width=args.width, height=args.height, max_frames=args.max_frames)
+    print(f"wrote {args.out}: {frames} frames, {actor.source}, stage {actor.env.unwrapped.stage}, "
+          f"success {sum(successes)}/{len(successes)}")
     return 0
 
 

@@ -9,17 +9,60 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import imageio.v2 as imageio
 import mujoco
 import numpy as np
 
-from taskforge.agents import RL2Trial
-from taskforge.envs import TaskEnv
+from taskforge.agents import RL2Trial, wrap_for_training
+from taskforge.demos import scripted_policy
+from taskforge.envs import TaskEnv, load_task
+from taskforge.run import load_run
 from taskforge.spec import SpecError
 
 DEFAULT_CAMERAS = {"metaworld": "corner", "xarm7": "front"}
+
+
+@dataclass
+class Actor:
+    """What plays the rendered episodes: the env, `act(obs, episode_start) -> action`, and a few
+    words on who acts, for the summary line."""
+
+    env: TaskEnv | RL2Trial
+    act: Callable[[np.ndarray, bool], np.ndarray]
+    source: str
+
+
+def scripted_actor(task_file: Path, stage: str | None, split: str) -> Actor:
+    """A task file's scripted policy (the demonstrations' teacher) on one of its stages."""
+    env = TaskEnv(load_task(task_file), task_file, stage=stage, split=split)
+    policy = scripted_policy(env, stage)
+
+    def act(obs: np.ndarray, start: bool) -> np.ndarray:
+        if start:
+            policy.reset(env)
+        return policy(env)
+
+    return Actor(env, act, f"scripted ({policy.name})")
+
+
+def policy_actor(run_path: Path, stage: str | None, split: str) -> Actor:
+    """A run's policy (`taskforge.run.load_run`) on a stage of its first phase (default: the
+    phase's last stage), acting with its mean; for RL² an "episode" is a whole trial."""
+    run = load_run(run_path)
+    agent = run.agent
+    task, task_file, stages = run.phases[0]
+    env = TaskEnv(task, task_file, stage=stage or stages[-1], split=split, privileged=agent.privileged_dim > 0)
+    state = agent.initial_state(1)
+
+    def act(obs: np.ndarray, start: bool) -> np.ndarray:
+        nonlocal state
+        action, state = agent.act(obs[None], state, np.array([start]), deterministic=True)
+        return action[0]
+
+    return Actor(wrap_for_training(env, agent.spec), act, f"policy at step {agent.global_step:,}")
 
 
 def _make_renderer(model: mujoco.MjModel, height: int, width: int, out: Path) -> mujoco.Renderer:

@@ -81,17 +81,6 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     ]
     for i, phase in enumerate(cur.phases):
         lines.append(f"  phase {i + 1}: {phase.task.name} ({phase.task_file}): {' -> '.join(phase.stages)}")
-        if cur.agent.algo == "rl2" and phase.task.goals.observable:
-            lines.append("    note: the goal is observable here, so RL² has nothing to infer (meta-RL hides it: goals.observable: false)")
-        bptt = cur.agent.ppo.bptt_length
-        if cur.agent.algo == "rl2" and bptt is not None:
-            # Trials start at chunk starts; episodes that run to their limit E then start at multiples
-            # of E, which all fall on chunk starts when L divides E: no gradient ever crosses them.
-            aligned = sorted({n for n in phase.stages if phase.task.episode_steps(phase.task.stage(n)) % bptt == 0})
-            if aligned:
-                lines.append(f"    note: bptt_length {bptt} divides the episode length of {', '.join(aligned)}: every BPTT chunk "
-                             "then lies inside one episode and RL² gets no gradient to carry what it learnt into the next "
-                             "episode (choose a bptt_length that does not divide it)")
     lines.append(
         f"  evaluate every {spec.evaluation.every_steps:,} steps on {spec.evaluation.episodes} "
         f"{spec.evaluation.split} {'trials' if cur.agent.algo == 'rl2' else 'episodes'}; checkpoint every {spec.checkpoint.every_steps:,} steps"

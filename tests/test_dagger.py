@@ -18,7 +18,7 @@ from taskforge.demos.labels import EXPERT_ACTION, ExpertLabels
 from taskforge.envs import TaskEnv, load_task
 from taskforge.training import train
 from taskforge.training.dagger import student_rollout
-from taskforge.training.metrics import read_jsonl
+from taskforge.run import read_jsonl
 from tests.conftest import PICK_PLACE
 from tests.test_agents_ppo import SMALL_PPO, agent_spec, pendulum_envs
 

@@ -138,3 +138,39 @@ def test_backlash_width_is_drawn_per_episode_and_off_by_default():
     first = on.half.copy()
     on.reset(np.random.default_rng(2))
     assert not np.array_equal(first, on.half) and (on.half <= 0.1).all()
+
+
+def test_joint_range_shifts_the_limits_of_limited_hinges_only():
+    """Learning Dexterity's joint-limit row (additive N(0, 0.15) rad) on the xArm7: every arm
+    joint's range moves by its own draw, both limits together; the finger slides keep theirs."""
+    import mujoco
+
+    from taskforge.spec import PhysicsTermSpec
+    from tests.conftest import ROOT
+
+    xarm = ROOT / "tasks/xarm7/pick_place.yaml"
+    xtask = load_task(xarm)
+    m = make_backend(xtask, xarm).model("xarm7")
+    nominal = m.jnt_range.copy()
+    term = PhysicsTermSpec(target="joint_range", op="add", dist="normal", mean=0.0, std=0.15)
+    rnd = PhysicsRandomizer(m, [term])
+    draw = rnd.apply(np.random.default_rng(0))
+    hinges = [j for j in range(m.njnt) if m.jnt_limited[j] and m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+    assert len(hinges) >= 7 and draw.size == len(hinges) and np.all(draw != 0.0)
+    np.testing.assert_allclose(m.jnt_range[hinges] - nominal[hinges], np.stack([draw, draw], axis=1))
+    others = [j for j in range(m.njnt) if j not in hinges]
+    np.testing.assert_array_equal(m.jnt_range[others], nominal[others])
+    rnd.restore()
+    np.testing.assert_array_equal(m.jnt_range, nominal)
+
+
+def test_an_unknown_physics_target_lists_the_registered_ones(model):
+    from taskforge.randomization import PHYSICS_TARGETS
+    from taskforge.spec import PhysicsTermSpec, SpecError
+
+    m, obj = model
+    with pytest.raises(SpecError) as exc:
+        PhysicsRandomizer(m, [PhysicsTermSpec(target="body_masss", dist="uniform", low=0.5, high=1.5)], obj, "task.yaml")
+    message = str(exc.value)
+    assert message.startswith("task.yaml: randomization.physics[0].target: unknown physics target 'body_masss'")
+    assert "did you mean 'body_mass'" in message and "joint_range" in message and set(PHYSICS_TARGETS) >= {"joint_range", "gravity"}

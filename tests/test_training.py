@@ -18,8 +18,7 @@ import yaml
 
 from taskforge.cli import main
 from taskforge.training import train
-from taskforge.training.checkpoint import load_checkpoint
-from taskforge.training.metrics import read_jsonl
+from taskforge.run import load_checkpoint, read_jsonl
 from tests.conftest import ROOT
 
 # Pendulum is a fast stand-in simulator; the curriculum logic is the same for every backend.
@@ -192,9 +191,8 @@ def test_stochastic_eval_is_seeded_and_leaves_the_agents_random_stream_alone(tmp
     """`--stochastic` samples actions: the same seed gives the same report, another seed or the
     mean action a different one; evaluating never moves the agent's own generator (the trainer
     evaluates mid-run)."""
-    from taskforge.evaluation.evaluate import evaluate
-    from taskforge.evaluation.report import load_agent
-    from taskforge.spec import TaskSpec
+    from taskforge.rollouts import evaluate
+    from taskforge.run import load_run
 
     run = train(write_curriculum(tmp_path, total_steps=400), run_dir=tmp_path / "run", progress=False)
 
@@ -211,10 +209,11 @@ def test_stochastic_eval_is_seeded_and_leaves_the_agents_random_stream_alone(tmp
     mean = returns("--seed", "1")
     assert mean[0] == "mean" and mean[1] != sampled[1]
 
-    agent, config, _ = load_agent(run / "final.pt")
+    loaded = load_run(run / "final.pt")
+    agent = loaded.agent
+    task, task_file, _ = loaded.phases[0]
     before = agent.generator.get_state()
-    evaluate(agent, TaskSpec.model_validate(config["phases"][0]["task"]), config["phases"][0]["task_file"], "easy", "test", 1,
-             seed=5, deterministic=False)
+    evaluate(agent, task, task_file, "easy", "test", 1, seed=5, deterministic=False)
     assert torch.equal(agent.generator.get_state(), before)
 
 
@@ -252,10 +251,22 @@ def test_unknown_agent_and_bad_yaml_in_curriculum(tmp_path, capsys):
     assert "agent.yaml: invalid YAML at line 2" in capsys.readouterr().err
 
 
-def test_resume_without_checkpoint_or_with_other_curriculum(tmp_path, capsys):
+def test_resume_before_the_first_checkpoint_starts_afresh(tmp_path, capsys):
+    """A script that always passes --resume after a crash: a run killed before its first
+    checkpoint starts again from step 0 with a note, and what it logged is not kept twice."""
+    cur = write_curriculum(tmp_path, total_steps=400, checkpoint={"every_steps": 10_000})
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "metrics.jsonl").write_text(json.dumps({"step": 200, "stale": True}) + "\n")  # the killed run's log
+    assert main(["train", str(cur), "--run-dir", str(run), "--resume", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"note: no checkpoint.pt in {run} yet" in err and "starting the run afresh" in err
+    steps = [m["step"] for m in read_jsonl(run / "metrics.jsonl")]
+    assert steps == [200, 400] and not any("stale" in m for m in read_jsonl(run / "metrics.jsonl"))
+
+
+def test_resume_with_other_curriculum_is_refused(tmp_path, capsys):
     cur = write_curriculum(tmp_path, total_steps=200)
-    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run"), "--resume"]) == 2
-    assert "no checkpoint.pt to resume from" in capsys.readouterr().err
     train(cur, run_dir=tmp_path / "run", progress=False)
     other = write_curriculum(tmp_path, total_steps=200, promotion={"threshold": 0.5, "window": 4})
     assert main(["train", str(other), "--run-dir", str(tmp_path / "run"), "--resume"]) == 2

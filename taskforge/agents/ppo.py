@@ -334,7 +334,8 @@ class PPOAgent:
 
     def update(self) -> dict[str, float]:
         """PPO epochs over the last rollout; returns the mean of each loss statistic over the
-        minibatches run, plus `explained_variance`, `learning_rate` and `epochs`."""
+        minibatches run, plus `explained_variance`, `learning_rate`, `epochs` and
+        `skipped_minibatches` (those whose loss or gradient was not finite: not applied)."""
         if not self._rollout_ready:
             raise RuntimeError("update() needs a fresh rollout: call collect() first")
         with torch_threads(update_threads(self.spec.runtime)):  # the env workers idle meanwhile
@@ -343,7 +344,7 @@ class PPOAgent:
     def _update(self) -> dict[str, float]:
         ppo = self.spec.ppo
         totals: dict[str, float] = {}
-        minibatches_run = 0
+        minibatches_run = skipped = 0
         epochs = 0
         train_actor = self.num_updates >= self.critic_warmup_until  # critic warm-up (see warm_up_critic)
         demos = self.demo_regularizer if train_actor else None
@@ -363,7 +364,11 @@ class PPOAgent:
                 self.optimizer.zero_grad()
                 total.backward()
                 # global gradient clipping (detail #11)
-                nn.utils.clip_grad_norm_(self.policy.parameters(), ppo.max_grad_norm)
+                grad_norm = nn.utils.clip_grad_norm_(self.policy.parameters(), ppo.max_grad_norm)
+                if not (torch.isfinite(total) and torch.isfinite(grad_norm)):
+                    # a non-finite loss or gradient would put NaN into every weight: skip it, count it
+                    skipped += 1
+                    continue
                 self.optimizer.step()
                 for name in ("policy_loss", "value_loss", "entropy", "approx_kl", "old_approx_kl", "clipfrac"):
                     totals[name] = totals.get(name, 0.0) + getattr(loss, name)
@@ -373,7 +378,8 @@ class PPOAgent:
 
         self.num_updates += 1
         self._rollout_ready = False
-        metrics = {name: total / minibatches_run for name, total in totals.items()}
+        metrics = {name: total / max(minibatches_run, 1) for name, total in totals.items()}
+        metrics["skipped_minibatches"] = float(skipped)
         metrics["explained_variance"] = explained_variance(self.buffer.values, self.buffer.returns)
         metrics["learning_rate"] = self.optimizer.param_groups[0]["lr"]
         metrics["epochs"] = float(epochs)

@@ -16,7 +16,6 @@ Meta-World always runs with the goal *observable* here; the env hides it by zero
 from __future__ import annotations
 
 import functools
-import math
 import os
 import pickle
 from pathlib import Path
@@ -30,6 +29,7 @@ from metaworld.types import Task
 
 from taskforge.atomic import atomic_write
 from taskforge.backends.base import GoalOverride, Split, draw_starts_apart
+from taskforge.backends.mujoco_common import distances, override_goal, pads_press
 from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
 from taskforge.spec.task import GoalsSpec, MetaWorldBackendSpec
 from taskforge.terms import ENV_FEATURES, FEATURES, Features
@@ -150,7 +150,7 @@ class MetaWorldBackend:
         rest = obs[4:7].copy()
         self._rest_height = float(rest[2])
         if not goal.is_identity:
-            _override_goal(env, rest, goal)
+            _set_goal(env, override_goal(env._target_pos, rest, goal))
         self._obs = obs
         self._prev_obj = rest
         self._native_reward, self._native_success, self._native_return = 0.0, 0.0, 0.0
@@ -212,11 +212,9 @@ class MetaWorldBackend:
             "object_pos": obj,
             "goal_pos": goal,
             "gripper_opening": float(obs[3]),
-            "object_grasped": _pads_press(env.data, *self._grasp_ids),
+            "object_grasped": pads_press(env.data, *self._grasp_ids),
             "object_height": obj_l[2] - self._rest_height,
-            "object_to_goal_distance": math.dist(obj_l, goal_l),
-            "tcp_to_object_distance": math.dist(tcp_l, obj_l),
-            "tcp_to_goal_distance": math.dist(tcp_l, goal_l),
+            **distances(tcp_l, obj_l, goal_l),
             "object_velocity": (obj - self._prev_obj) / self.dt,
             "native_reward": self._native_reward,
             "native_success": self._native_success,
@@ -274,13 +272,7 @@ def create(task: TaskSpec, file: str | Path) -> MetaWorldBackend:
     return MetaWorldBackend(task.backend, task.goals)
 
 
-def _override_goal(env: metaworld.SawyerXYZEnv, rest: np.ndarray, goal: GoalOverride) -> None:
-    target = np.array(env._target_pos, dtype=float)
-    target[:2] = rest[:2] + goal.distance_scale * (target[:2] - rest[:2])
-    if goal.height == "object":
-        target[2] = rest[2]
-    elif goal.height != "keep":
-        target[2] = float(goal.height)
+def _set_goal(env: metaworld.SawyerXYZEnv, target: np.ndarray) -> None:
     env._target_pos = target
     # Meta-World keeps the goal in a site; move it so rendering and `_get_obs` agree.
     env.model.site("goal").pos = target
@@ -296,23 +288,6 @@ def _main_object(env: metaworld.SawyerXYZEnv) -> int | None:
         return None
 
 
-def _grasp_geoms(env: metaworld.SawyerXYZEnv) -> tuple[int, int, int | None]:
-    return env.data.geom("leftpad_geom").id, env.data.geom("rightpad_geom").id, _main_object(env)
-
-
-def _pads_press(data: mujoco.MjData, left: int, right: int, obj: int | None) -> float:
-    """1.0 when both finger pads push on the object (Meta-World's `touching_object`).
-
-    Runs every step over a handful of contacts: a plain loop over `tolist()` beats both
-    Meta-World's per-contact struct access and numpy reductions (whose call overhead dominates
-    at this size).
-    """
-    if obj is None or data.ncon == 0:
-        return 0.0
-    contact = data.contact
-    pressing = set()
-    for k, (a, b) in enumerate(contact.geom.tolist()):
-        other = b if a == obj else a if b == obj else -1
-        if (other == left or other == right) and data.efc_force[contact.efc_address[k]] > 0:
-            pressing.add(other)
-    return float(len(pressing) == 2)
+def _grasp_geoms(env: metaworld.SawyerXYZEnv) -> tuple[int | None, tuple[int], tuple[int]]:
+    """(object, left pads, right pads) for `pads_press`."""
+    return _main_object(env), (env.data.geom("leftpad_geom").id,), (env.data.geom("rightpad_geom").id,)

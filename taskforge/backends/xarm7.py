@@ -89,6 +89,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from taskforge.backends.base import GoalOverride, Split
+from taskforge.backends.mujoco_common import distances, override_goal, pads_press
 from taskforge.backends.xarm7_control import CartesianIK
 from taskforge.backends.xarm7_scene import (
     ARM_ACTUATORS,
@@ -233,7 +234,7 @@ class XArm7Backend:
         rest = d.qpos[a : a + 3].copy()
         self._rest = rest
         if not goal.is_identity:
-            goal_pos = _override_goal(goal_pos, rest, goal)
+            goal_pos = override_goal(goal_pos, rest, goal)
             d.mocap_pos[self._goal_mocap] = goal_pos
         self._goal = goal_pos
         self._target = d.site_xpos[self._tcp].copy()
@@ -310,11 +311,9 @@ class XArm7Backend:
             "object_pos": obj,
             "goal_pos": self._goal.copy(),
             "gripper_opening": self._opening(),
-            "object_grasped": _pads_press(d, self._obj_geom, self._left, self._right),
+            "object_grasped": pads_press(d, self._obj_geom, self._left, self._right),
             "object_height": obj_l[2] - float(self._rest[2]),
-            "object_to_goal_distance": math.dist(obj_l, goal_l),
-            "tcp_to_object_distance": math.dist(tcp_l, obj_l),
-            "tcp_to_goal_distance": math.dist(tcp_l, goal_l),
+            **distances(tcp_l, obj_l, goal_l),
             "object_velocity": d.qvel[v : v + 3].copy(),
             "native_reward": 0.0,
             "native_success": self._native_success,
@@ -323,38 +322,6 @@ class XArm7Backend:
 
     def close(self) -> None:
         pass
-
-
-def _override_goal(goal: np.ndarray, rest: np.ndarray, override: GoalOverride) -> np.ndarray:
-    """The stage's goal override, exactly as Meta-World's backend applies it."""
-    out = goal.copy()
-    out[:2] = rest[:2] + override.distance_scale * (goal[:2] - rest[:2])
-    if override.height == "object":
-        out[2] = rest[2]
-    elif override.height != "keep":
-        out[2] = float(override.height)
-    return out
-
-
-def _pads_press(data: mujoco.MjData, obj: int, left: frozenset[int], right: frozenset[int]) -> float:
-    """1.0 when a geom of each finger touches the cube with positive normal force (a plain loop
-    over the few contacts: cheaper than numpy reductions at this size)."""
-    if data.ncon == 0:
-        return 0.0
-    contact = data.contact
-    efc_force, efc_address = data.efc_force, contact.efc_address
-    touch_left = touch_right = False
-    for k, (g1, g2) in enumerate(contact.geom.tolist()):
-        other = g2 if g1 == obj else g1 if g2 == obj else -1
-        if other < 0 or not (other in left or other in right):
-            continue
-        adr = efc_address[k]
-        if adr >= 0 and efc_force[adr] > 0:
-            if other in left:
-                touch_left = True
-            else:
-                touch_right = True
-    return float(touch_left and touch_right)
 
 
 # --- checks and construction ------------------------------------------------------------------

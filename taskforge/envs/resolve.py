@@ -50,7 +50,8 @@ class ResolvedCurriculum:
     demos_file: Path | None = None
     """`warm_start.demos`, resolved relative to the curriculum file."""
     warnings: tuple[str, ...] = ()
-    """Legal but probably unintended (see `hidden_goal_warnings`); `validate` and `train` print them."""
+    """Legal but probably unintended (see `curriculum_warnings`): `validate` and `train` print them
+    and `train` writes them to the run's events."""
 
 
 def load_curriculum(path: str | Path) -> ResolvedCurriculum:
@@ -80,8 +81,37 @@ def load_curriculum(path: str | Path) -> ResolvedCurriculum:
         demos_file = _check_warm_start(spec, path, agent, phases, issues)
     if issues:
         raise SpecError(issues)
-    warnings = tuple(hidden_goal_warnings(path, agent, phases))
+    warnings = tuple(curriculum_warnings(path, agent, phases))
     return ResolvedCurriculum(path, spec, agent_file, agent, phases, demos_file, warnings)
+
+
+def curriculum_warnings(path: Path, agent: AgentSpec, phases: list[CurriculumPhase]) -> list[str]:
+    """Every warning of a curriculum, one line each, naming the file, phase and stage."""
+    return hidden_goal_warnings(path, agent, phases) + rl2_warnings(path, agent, phases)
+
+
+def rl2_warnings(path: Path, agent: AgentSpec, phases: list[CurriculumPhase]) -> list[str]:
+    """An RL² agent with nothing to infer (the goal observable), or whose BPTT chunks never cross
+    an episode boundary: trials start at chunk starts, and episodes that run to their limit E start
+    at multiples of E, which all fall on chunk starts when `bptt_length` divides E, so no gradient
+    ever carries what was learnt in one episode into the next."""
+    if agent.algo != "rl2":
+        return []
+    lines = []
+    bptt = agent.ppo.bptt_length
+    for i, phase in enumerate(phases):
+        task = phase.task
+        where = f"{path}: phases[{i}] ({phase.task_file})"
+        if task.goals.observable:
+            lines.append(f"{where}: the goal is observable, so RL² has nothing to infer (meta-RL hides it: goals.observable: false)")
+        aligned = sorted({n for n in phase.stages if bptt is not None and task.episode_steps(task.stage(n)) % bptt == 0})
+        if aligned:
+            lines.append(
+                f"{where}: agent ppo.bptt_length {bptt} divides the episode length of stage {', '.join(aligned)}: every "
+                "BPTT chunk then lies inside one episode and RL² cannot learn to carry what it found into the next "
+                "episode; choose a bptt_length that does not divide it"
+            )
+    return lines
 
 
 def hidden_goal_warnings(path: Path, agent: AgentSpec, phases: list[CurriculumPhase]) -> list[str]:

@@ -9,6 +9,7 @@ noise/latency -> backend.reset.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,7 @@ import numpy as np
 from gymnasium.spaces import Box
 
 from taskforge.backends import Backend, GoalOverride, Split, make_backend
+from taskforge.backends.mujoco_common import diverged
 from taskforge.randomization import ActionBacklash, ActionLatency, AdditiveNoise, PhysicsRandomizer
 from taskforge.spec import SpecError, TaskSpec, expected_one_of
 from taskforge.terms import FEATURES, CompiledStage, Features
@@ -40,7 +42,9 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
     `info` on every step carries `success` (the stage's condition this step), `episode_success`
     (it held at some step of this episode: Meta-World's convention), `native_success`
     (Meta-World's own flag), `reward_terms` (each term's unweighted value), `stage`, `task` and
-    `goal_index`; with `privileged=True` also `privileged` (object velocity, true goal and the
+    `goal_index`; `unstable` on the step that ended an episode whose simulation blew up (see
+    `_unstable_step`); on an episode's last step also `episode_reward_terms` (each term's weighted sum
+    over the episode: what the stage's weights made of it, Isaac Lab's `Episode_Reward/<term>`); with `privileged=True` also `privileged` (object velocity, true goal and the
     physics draws), for an asymmetric critic.
     """
 
@@ -157,6 +161,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         # which finished episodes were replays without tracking autoresets itself.
         self._episode = {"stage": self.stage, "task": name, "goal_index": goal_index, "replay": bool(options.get("replay", False))}
         self._ever_success = False
+        self._reward_sums = dict.fromkeys((t.key for t in self.stages[self.stage].terms), 0.0)
         self._physics_draw = physics_draw
         features = self.backend.features()
         features["action"] = np.zeros(self.action_space.shape[0])
@@ -164,7 +169,9 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         return self._observe(obs), info
 
     def step(self, action: np.ndarray):
-        chosen = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+        action = np.asarray(action, dtype=np.float64)
+        finite_action = bool(np.isfinite(action).all())
+        chosen = np.clip(action if finite_action else np.nan_to_num(action, nan=0.0), -1.0, 1.0)
         applied = self._backlash(self._latency(self._act_noise(chosen, self.np_random)))
         obs, ended = self.backend.step(np.clip(applied, -1.0, 1.0))
         self._t += 1
@@ -173,13 +180,34 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         features["action"] = chosen
         stage = self.stages[self.stage]
         success = stage.success(features)
-        self._ever_success |= success
         features["stage_success"] = float(success)
         reward, terms = stage.reward(features)
+        if not (finite_action and math.isfinite(reward) and np.isfinite(obs).all() and not self._diverged()):
+            return self._unstable_step(obs, features, terms)
+        self._ever_success |= success
+        for term in stage.terms:
+            self._reward_sums[term.key] += term.weight * terms[term.key]
 
         terminated = ended or (success and (stage.spec.terminate_on_success or self.end_on_success))
         truncated = self._t >= self.max_episode_steps
-        return self._observe(obs), reward, terminated, truncated, self._info(features, success, terms)
+        info = self._info(features, success, terms)
+        if terminated or truncated:
+            info["episode_reward_terms"] = dict(self._reward_sums)
+        return self._observe(obs), reward, terminated, truncated, info
+
+    def _diverged(self) -> bool:
+        data = self.backend.data
+        return data is not None and diverged(data)
+
+    def _unstable_step(self, obs: np.ndarray, features: Features, terms: dict[str, float]):
+        """A non-finite action, reward or observation, or a MuJoCo simulation that blew up (extreme
+        randomisation can do it): the episode ends here, truncated (its state is nonsense, not a
+        terminal state to learn a value of), with reward 0 and a finite observation, and
+        `info["unstable"]` so the trainer counts it. Nothing non-finite reaches the agent."""
+        info = self._info(features, False, dict.fromkeys(terms, 0.0))
+        info.update(unstable=True, episode_reward_terms=dict(self._reward_sums))
+        obs = np.nan_to_num(np.asarray(obs, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        return self._observe(obs), 0.0, False, True, info
 
     def _observe(self, obs: np.ndarray) -> np.ndarray:
         obs = self._obs_noise(obs, self.np_random)

@@ -1,6 +1,6 @@
-"""Held-out evaluation, Wilson intervals, reports and learning-curve plots."""
+"""`taskforge eval` reports and learning-curve plots. The rollouts they measure with live in
+`taskforge.rollouts` (training evaluates with them too); re-exported here."""
 
-from taskforge.evaluation.evaluate import StageResult, evaluate
-from taskforge.evaluation.stats import wilson_interval
+from taskforge.rollouts import StageResult, evaluate, wilson_interval
 
 __all__ = ["StageResult", "evaluate", "wilson_interval"]

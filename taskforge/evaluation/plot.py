@@ -13,17 +13,17 @@ import matplotlib
 matplotlib.use("Agg")  # no display on training machines
 import matplotlib.pyplot as plt  # noqa: E402
 
+from taskforge.run import RunDir  # noqa: E402
 from taskforge.spec import SpecError  # noqa: E402
-from taskforge.training.metrics import read_jsonl  # noqa: E402
 
 
 def plot_run(run_dir: str | Path, out: str | Path | None = None) -> Path:
-    run_dir = Path(run_dir)
-    metrics = read_jsonl(run_dir / "metrics.jsonl")
+    run = RunDir(run_dir)
+    metrics = run.read_metrics()
     if not metrics:
-        raise SpecError.single(run_dir, "", "no metrics.jsonl with records; expected a taskforge run directory")
-    events = read_jsonl(run_dir / "events.jsonl")
-    out = Path(out) if out else run_dir / "curves.png"
+        raise SpecError.single(run.path, "", f"no {run.metrics.name} with records; expected a taskforge run directory")
+    events = [e for e in run.read_events() if "to_stage" in e]  # promotions and demotions
+    out = Path(out) if out else run.curves
 
     fig, (ax_ret, ax_succ) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
     rows = [m for m in metrics if m.get("return_mean") is not None]
@@ -44,7 +44,7 @@ def plot_run(run_dir: str | Path, out: str | Path | None = None) -> Path:
         ax_ret.annotate(f"{e['kind']} → {e['to_stage']}", (e["step"], 1.0), xycoords=("data", "axes fraction"),
                         rotation=90, va="top", ha="right", fontsize=7, color="grey")
     ax_succ.legend(loc="upper left", fontsize=8)
-    ax_ret.set_title(run_dir.name)
+    ax_ret.set_title(run.path.name)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)

@@ -1,4 +1,4 @@
-"""`taskforge eval`: load a checkpoint, evaluate every (task, stage) of its curriculum on a
+"""`taskforge eval`: load a run (`taskforge.run.load_run`), evaluate every (task, stage) of its curriculum on a
 split in trials (one per goal), print a table with the adaptation curve and write JSON."""
 
 from __future__ import annotations
@@ -6,44 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import torch
-
-from taskforge.agents import PPOAgent, agent_observation_space
-from taskforge.envs import PhaseShapes, probe_phases
-from taskforge.evaluation.evaluate import StageResult, evaluate
-from taskforge.spec import AgentSpec, SpecError, TaskSpec
-
-CHECKPOINT_NAMES = ("final.pt", "checkpoint.pt")
-
-
-def find_checkpoint(path: str | Path) -> Path:
-    """A run directory (its final policy, else its last checkpoint) or a checkpoint file."""
-    path = Path(path)
-    if path.is_dir():
-        for name in CHECKPOINT_NAMES:
-            if (path / name).is_file():
-                return path / name
-        raise SpecError.single(path, "", f"no {' or '.join(CHECKPOINT_NAMES)} in this run directory")
-    if not path.is_file():
-        raise SpecError.single(path, "", "no such run directory or checkpoint file")
-    return path
-
-
-def load_agent(checkpoint: Path) -> tuple[PPOAgent, dict[str, Any], PhaseShapes]:
-    """The agent of a checkpoint, the run config stored with it (tasks included, so the original
-    YAML files need not exist any more) and the phases' shapes and sub-task names."""
-    try:
-        state = torch.load(checkpoint, map_location="cpu", weights_only=False)
-        config = state["config"]
-    except Exception as exc:  # not a taskforge checkpoint, or a truncated file
-        raise SpecError.single(checkpoint, "", f"not a readable taskforge checkpoint ({exc.__class__.__name__}: {exc})") from None
-    agent_spec = AgentSpec.model_validate(config["agent"])
-    phases = [(TaskSpec.model_validate(p["task"]), p["task_file"]) for p in config["phases"]]
-    shapes = probe_phases(phases, agent_spec.asymmetric_critic, checkpoint)
-    obs_space = agent_observation_space(agent_spec, shapes.observation_space, shapes.action_space)
-    agent = PPOAgent(agent_spec, obs_space, shapes.action_space, shapes.privileged_size, seed=config["seed"])
-    agent.load_state_dict(state["agent"])
-    return agent, config, shapes
+from taskforge.rollouts import StageResult, evaluate
+from taskforge.run import load_run
+from taskforge.spec import SpecError
 
 
 def evaluate_run(
@@ -58,23 +23,22 @@ def evaluate_run(
     """Evaluate a run: `trials` trials per (task, stage), trial k on goal k of the split, each of
     `trial_episodes` episodes (default the agent's: K for RL², 1 for PPO), acting with the
     policy's mean or (`deterministic` False) sampling from it."""
-    checkpoint = find_checkpoint(path)
-    agent, config, shapes = load_agent(checkpoint)
+    run = load_run(path)
+    agent = run.agent
     k = trial_episodes or agent.spec.trial_episodes
     rows: list[StageResult] = []
-    for phase, sub_task_names in zip(config["phases"], shapes.task_names):
-        task = TaskSpec.model_validate(phase["task"])
-        names = phase["stages"] if not stages else [s for s in phase["stages"] if s in stages]
+    for (task, task_file, phase_stages), sub_task_names in zip(run.phases, run.shapes.task_names):
+        names = phase_stages if not stages else [s for s in phase_stages if s in stages]
         sub_tasks = sub_task_names if len(sub_task_names) > 1 else [None]
         for stage in names:
             for sub in sub_tasks:
-                rows.append(evaluate(agent, task, phase["task_file"], stage, split, trials, k, sub_task=sub, seed=seed,
+                rows.append(evaluate(agent, task, task_file, stage, split, trials, k, sub_task=sub, seed=seed,
                                      deterministic=deterministic))
     if stages and not rows:
-        known = sorted({s for p in config["phases"] for s in p["stages"]})
-        raise SpecError.single(checkpoint, "stage", f"none of {', '.join(stages)} is in this run; expected one of {', '.join(known)}")
+        known = sorted({s for _, _, phase_stages in run.phases for s in phase_stages})
+        raise SpecError.single(run.checkpoint, "stage", f"none of {', '.join(stages)} is in this run; expected one of {', '.join(known)}")
     return {
-        "checkpoint": str(checkpoint),
+        "checkpoint": str(run.checkpoint),
         "step": agent.global_step,
         "algo": agent.spec.algo,
         "split": split,

@@ -345,11 +345,6 @@ class StageSpec(StrictModel):
 
 # --- randomisation -------------------------------------------------------------------------
 
-PhysicsTarget = Literal[
-    "body_mass", "geom_friction", "dof_damping", "actuator_gain", "gravity", "object_size"
-]
-
-
 class PhysicsTermSpec(Distribution):
     """A draw applied to one kind of MuJoCo model parameter at every reset.
 
@@ -359,7 +354,9 @@ class PhysicsTermSpec(Distribution):
     shared by every matched element.
     """
 
-    target: PhysicsTarget
+    target: str
+    """A registered physics target (`taskforge.randomization.PHYSICS_TARGETS`): body_mass,
+    geom_friction, dof_damping, joint_range, actuator_gain, gravity, object_size."""
     op: Literal["scale", "add"] = "scale"
     names: list[str] = Field(default_factory=list)
     per_element: bool = True

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Literal
 
 Kernel = Callable[[float, float, float], float]
 
@@ -45,3 +46,6 @@ KERNELS: dict[str, Kernel] = {
     "exponential": _exponential,
     "negative": _negative,
 }
+
+KernelName = Literal[tuple(KERNELS)]  # type: ignore[valid-type]
+"""The names a `kernel:` parameter accepts, read from `KERNELS` so a new kernel is one entry."""

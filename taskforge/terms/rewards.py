@@ -9,13 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Literal
 
 from pydantic import Field
 
 from taskforge.spec import StrictModel
 from taskforge.terms.features import Features
-from taskforge.terms.kernels import KERNELS
+from taskforge.terms.kernels import KERNELS, KernelName
 
 
 class NoParams(StrictModel):
@@ -23,7 +22,7 @@ class NoParams(StrictModel):
 
 
 class DistanceParams(StrictModel):
-    kernel: Literal["gaussian", "long_tail", "linear", "exponential", "negative"] = "long_tail"
+    kernel: KernelName = "long_tail"
     margin: float = Field(default=0.1, gt=0.0, le=10.0)
     """Distance (m) at which the reward has fallen to `value_at_margin`."""
     value_at_margin: float = Field(default=0.1, gt=0.0, lt=1.0)

@@ -1,6 +1,6 @@
-"""The training loop, checkpoints (atomic), logging (TensorBoard, JSONL) and progress."""
+"""The training loop, warm start, DAgger and metrics logging. The run directory and checkpoints
+they write live in `taskforge.run`."""
 
-from taskforge.training.checkpoint import load_checkpoint, save_checkpoint
-from taskforge.training.trainer import CHECKPOINT, FINAL, FINAL_EVAL, Interrupted, train
+from taskforge.training.trainer import Interrupted, train
 
-__all__ = ["CHECKPOINT", "FINAL", "FINAL_EVAL", "Interrupted", "load_checkpoint", "save_checkpoint", "train"]
+__all__ = ["Interrupted", "train"]

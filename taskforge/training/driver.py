@@ -29,6 +29,10 @@ class EpisodeStats:
     first_successes: list[bool] = field(default_factory=list)
     """RL² only: success of each finished trial's first episode (before it could adapt)."""
     stages: list[str] = field(default_factory=list)
+    unstable: int = 0
+    """Episodes cut short because the simulation blew up (`TaskEnv._unstable_step`)."""
+    reward_terms: dict[str, list[float]] = field(default_factory=dict)
+    """Each reward term's weighted sum over each finished episode that had it (stages differ)."""
 
 
 class CurriculumDriver:
@@ -77,6 +81,9 @@ class CurriculumDriver:
             if "trial_successes" in final:
                 self.stats.first_successes.append(bool(final["trial_successes"][i][0]))
             self.stats.stages.append(assignment.stage)
+            self.stats.unstable += bool(final.get("unstable", np.zeros(i + 1, bool))[i])
+            for term, value in _at(final, "episode_reward_terms", i).items():
+                self.stats.reward_terms.setdefault(term, []).append(float(value))
             self._return[i] = 0.0
             self._length[i] = 0
         self.new_events += events
@@ -87,3 +94,12 @@ class CurriculumDriver:
         stats, events = self.stats, self.new_events
         self.stats, self.new_events = EpisodeStats(), []
         return stats, events
+
+
+def _at(info: dict, key: str, i: int) -> dict[str, float]:
+    """Worker i's entry of a nested dict in a vector env's info: gymnasium stacks each sub-key
+    into an array with a `_<sub-key>` mask of the workers that had it."""
+    nested = info.get(key)
+    if not nested:
+        return {}
+    return {k: v[i] for k, v in nested.items() if not k.startswith("_") and nested.get(f"_{k}", np.ones(i + 1, bool))[i]}

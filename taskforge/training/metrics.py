@@ -10,6 +10,7 @@ from typing import Any
 from torch.utils.tensorboard import SummaryWriter
 
 from taskforge.atomic import atomic_write
+from taskforge.run import RunDir, read_jsonl
 
 
 class JsonlLog:
@@ -28,19 +29,6 @@ class JsonlLog:
         self._file.close()
 
 
-def read_jsonl(path: Path) -> list[dict[str, Any]]:
-    """Records of a JSONL file; a torn last line (killed mid-write) is skipped."""
-    if not path.exists():
-        return []
-    records = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue
-    return records
-
-
 def truncate_after(path: Path, step: int) -> None:
     """On resume, drop records written after the checkpoint (they will be written again)."""
     kept = [r for r in read_jsonl(path) if r.get("step", 0) <= step]
@@ -49,13 +37,16 @@ def truncate_after(path: Path, step: int) -> None:
 
 
 class MetricsLogger:
-    def __init__(self, run_dir: Path, resume_step: int | None):
-        if resume_step is not None:
-            for name in ("metrics.jsonl", "events.jsonl"):
-                truncate_after(run_dir / name, resume_step)
-        self.metrics = JsonlLog(run_dir / "metrics.jsonl")
-        self.events = JsonlLog(run_dir / "events.jsonl")
-        self.tensorboard = SummaryWriter(str(run_dir / "tensorboard"), purge_step=resume_step)
+    """`resume_step`: drop what a resumed run logged after its checkpoint. `fresh`: drop what a run
+    killed before its first checkpoint logged (it starts again from step 0)."""
+
+    def __init__(self, run: RunDir, resume_step: int | None, fresh: bool = False):
+        if resume_step is not None or fresh:
+            for path in (run.metrics, run.events):
+                truncate_after(path, -1 if fresh else resume_step)
+        self.metrics = JsonlLog(run.metrics)
+        self.events = JsonlLog(run.events)
+        self.tensorboard = SummaryWriter(str(run.tensorboard), purge_step=resume_step)
 
     def log(self, step: int, record: dict[str, Any]) -> None:
         self.metrics.write({"step": step, **record})

@@ -1,8 +1,9 @@
 """`taskforge train`: PPO along a curriculum, with logs, atomic checkpoints and resume.
 
-Reading order: load and check everything (no file is written before the inputs are known to be
-good) -> set up the run directory -> build agent, scheduler and envs -> the loop (collect,
-update, log, maybe rebuild envs for a new phase, maybe evaluate, maybe checkpoint) -> final save.
+Reading order: `train()` reads top to bottom. `_start()` decides what this call continues
+(a checkpoint, or nothing) and checks every input before any file is written; `_Session` holds
+what the loop works on (agent, scheduler, envs, logger) and does one thing per method: run one
+update, log it, switch phase, evaluate, checkpoint.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import copy
 import signal
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -21,19 +22,15 @@ import numpy as np
 from gymnasium.vector import VectorEnv
 from tqdm import tqdm
 
-from taskforge.agents import PPOAgent, agent_observation_space, make_vector_env, set_torch_threads, wrap_for_training
+from taskforge.agents import PPOAgent, make_vector_env, set_torch_threads, wrap_for_training
 from taskforge.curriculum import CurriculumScheduler
-from taskforge.envs import ResolvedCurriculum, TaskEnv, load_curriculum, probe_phases
-from taskforge.evaluation import evaluate
+from taskforge.envs import ResolvedCurriculum, TaskEnv, load_curriculum
+from taskforge.rollouts import StageResult, evaluate
+from taskforge.run import RunDir, build_agent, load_checkpoint, save_checkpoint, save_json
 from taskforge.spec import AgentSpec, SpecError, TaskSpec
-from taskforge.training.checkpoint import load_checkpoint, save_checkpoint, save_json
-from taskforge.training.driver import CurriculumDriver
+from taskforge.training.driver import CurriculumDriver, EpisodeStats
 from taskforge.training.metrics import MetricsLogger
 from taskforge.training.warm_start import prepare_warm_start
-
-CHECKPOINT = "checkpoint.pt"
-FINAL = "final.pt"
-FINAL_EVAL = "final_eval.json"
 
 
 class Interrupted(Exception):
@@ -59,18 +56,6 @@ def run_config(cur: ResolvedCurriculum, seed: int, total_steps: int) -> dict[str
     }
 
 
-def _train_env(task: TaskSpec, task_file: str, privileged: bool, agent: AgentSpec) -> gymnasium.Env:
-    """One worker's env: a `TaskEnv` on the train goals, in trials for RL²."""
-    return wrap_for_training(TaskEnv(task, task_file, split="train", privileged=privileged), agent)
-
-
-def _build_envs(cur: ResolvedCurriculum, phase: int, privileged: bool) -> VectorEnv:
-    spec = cur.agent
-    p = cur.phases[phase]
-    fns = [partial(_train_env, p.task, str(p.task_file), privileged, spec) for _ in range(spec.ppo.num_envs)]
-    return make_vector_env(fns, spec.runtime)
-
-
 def train(
     curriculum_file: str | Path,
     run_dir: str | Path | None = None,
@@ -86,166 +71,223 @@ def train(
     `steps` is the run's length: it sets the learning-rate schedule and is stored with the run.
     `stop_at` pauses earlier (checkpoint, no final policy) so that a long run can be split into
     jobs; the schedule still spans `steps`, which a chunked `steps` on every resume would not
-    (each chunk would anneal the learning rate to zero)."""
+    (each chunk would anneal the learning rate to zero). `resume` on a run that has no
+    checkpoint yet (killed before its first) starts it afresh, so a script may always pass it."""
     cur = load_curriculum(curriculum_file)
     for warning in cur.warnings:
         print(f"warning: {warning}", file=sys.stderr)
-    run_dir = Path(run_dir) if run_dir else Path("runs") / f"{cur.spec.name}-seed{cur.spec.seed if seed is None else seed}"
-    ckpt_file = run_dir / CHECKPOINT
-    state: dict[str, Any] | None = None
-    if resume:
-        if not ckpt_file.is_file():
-            raise SpecError.single(run_dir, "", f"no {CHECKPOINT} to resume from; start without --resume")
-        state = load_checkpoint(ckpt_file)
+    run = RunDir(run_dir or Path("runs") / f"{cur.spec.name}-seed{cur.spec.seed if seed is None else seed}")
+    start = _start(cur, run, seed, steps, resume)
+
+    set_torch_threads(cur.agent.runtime)
+    agent, shapes = build_agent(cur.agent, [(p.task, p.task_file) for p in cur.phases], start.seed, cur.file, cur.agent_file)
+    scheduler = CurriculumScheduler(cur.spec, [p.stages for p in cur.phases], shapes.task_names, start.seed)
+    if start.state:
+        agent.load_state_dict(start.state["agent"])
+        scheduler.load_state_dict(start.state["curriculum"])
+    # demos: pretraining (fresh runs only) and PPO's decaying BC term; writes no file yet
+    warm = prepare_warm_start(cur, agent, run, start.seed, resumed=start.state is not None, progress=progress)
+
+    # every input is good: from here on the run directory is written
+    run.path.mkdir(parents=True, exist_ok=True)
+    run.remove_stale_temporaries()
+    save_json(start.config, run.config)
+    session = _Session(cur, run, start, agent, scheduler, progress)
+    if start.state is None:
+        for warning in cur.warnings:
+            session.logger.event({"step": agent.global_step, "kind": "warning", "message": warning})
+    if warm is not None:
+        if warm.metrics is not None:  # evaluate right after pretraining: the curve starts where the demos left it
+            result = session.evaluate()
+            warm.metrics.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
+            session.say(f"eval {result.stage} on {result.split} after pretraining: success {result.success_rate:.2f}")
+        warm.record(run, session.logger)
+    session.run(until=start.total if stop_at is None else min(start.total, stop_at))
+    return run.path
+
+
+# ------------------------------------------------------------------------------ start or resume
+
+
+@dataclass
+class _Start:
+    seed: int
+    total: int
+    config: dict[str, Any]
+    state: dict[str, Any] | None
+    """The checkpoint this call continues, or None for a fresh run."""
+
+
+def _start(cur: ResolvedCurriculum, run: RunDir, seed: int | None, steps: int | None, resume: bool) -> _Start:
+    """What this call continues; every refusal is a `SpecError` before anything is written."""
+    state = None
+    if resume and run.checkpoint.is_file():
+        state = load_checkpoint(run.checkpoint)
         stored = state["config"]
         if stored["curriculum"] != cur.spec.model_dump(mode="json") or stored["agent"] != cur.agent.model_dump(mode="json"):
             raise SpecError.single(
-                curriculum_file, "", f"differs from the curriculum/agent of the run in {run_dir} (see its config.json); "
+                cur.file, "", f"differs from the curriculum/agent of the run in {run} (see its {run.config.name}); "
                 "resume with the same files or start a new --run-dir",
             )
         if seed is not None and seed != stored["seed"]:
-            raise SpecError.single(run_dir, "", f"was started with --seed {stored['seed']}; resume without --seed or with the same one")
+            raise SpecError.single(run.path, "", f"was started with --seed {stored['seed']}; resume without --seed or with the same one")
         seed = stored["seed"]
-    elif ckpt_file.exists():
-        raise SpecError.single(run_dir, "", f"already holds a run ({CHECKPOINT}); pass --resume to continue it or choose another --run-dir")
+    elif resume:
+        if run.final.is_file():
+            raise SpecError.single(run.path, "", f"holds a finished run ({run.final.name}) and no {run.checkpoint.name} to continue")
+        print(f"note: no {run.checkpoint.name} in {run} yet (stopped before its first checkpoint, or never started): "
+              "starting the run afresh", file=sys.stderr)
+    elif run.checkpoint.exists() or run.final.exists():
+        raise SpecError.single(run.path, "", f"already holds a run ({run.checkpoint.name}); pass --resume to continue it or choose another --run-dir")
     seed = cur.spec.seed if seed is None else seed
     total = steps or (state["config"]["total_steps"] if state else cur.spec.total_steps)
-    until = total if stop_at is None else min(total, stop_at)
-    config = run_config(cur, seed, total)
+    return _Start(seed, total, run_config(cur, seed, total), state)
 
-    agent_spec = cur.agent
-    privileged = agent_spec.asymmetric_critic
-    set_torch_threads(agent_spec.runtime)
-    shapes = probe_phases([(p.task, p.task_file) for p in cur.phases], privileged, cur.file)
-    if privileged and shapes.privileged_size == 0:
-        raise SpecError.single(cur.agent_file, "asymmetric_critic", "the curriculum's backends expose no privileged features; set it to false")
-    obs_space = agent_observation_space(agent_spec, shapes.observation_space, shapes.action_space)
-    agent = PPOAgent(agent_spec, obs_space, shapes.action_space, shapes.privileged_size, seed)
-    scheduler = CurriculumScheduler(cur.spec, [p.stages for p in cur.phases], shapes.task_names, seed)
-    if state:
-        agent.load_state_dict(state["agent"])
-        scheduler.load_state_dict(state["curriculum"])
-    # demos: behaviour-cloning pretraining (fresh runs only) and PPO's decaying BC term
-    warm = prepare_warm_start(cur, agent, run_dir, seed, resumed=state is not None, progress=progress)
 
-    run_dir.mkdir(parents=True, exist_ok=True)
-    for stale in run_dir.glob(".*.tmp"):  # half-written by a process killed mid-save
-        stale.unlink()
-    save_json(config, run_dir / "config.json")
-    logger = MetricsLogger(run_dir, resume_step=agent.global_step if state else None)
-    if warm is not None:
-        if warm.metrics is not None:  # evaluate right after pretraining: the curve starts where the demos left it
-            result = _evaluate_current(agent, cur, scheduler, seed)
-            warm.metrics.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
-            if progress:
-                print(f"[{agent.global_step:,}] eval {result.stage} on {result.split} after pretraining: "
-                      f"success {result.success_rate:.2f}", file=sys.stderr)
-        warm.record(run_dir, logger)
+# ------------------------------------------------------------------------------ the loop
 
-    def snapshot() -> dict[str, Any]:
-        return copy.deepcopy({"config": config, "agent": agent.state_dict(), "curriculum": scheduler.state_dict()})
 
-    every_ckpt = cur.spec.checkpoint.every_steps
-    every_eval = cur.spec.evaluation.every_steps
-    next_ckpt = (agent.global_step // every_ckpt + 1) * every_ckpt
-    next_eval = (agent.global_step // every_eval + 1) * every_eval
-    last_good = snapshot()  # what a Ctrl-C saves: the state after the last complete update
-    last_eval: tuple[int, Any] | None = None
+def _train_env(task: TaskSpec, task_file: str, privileged: bool, agent: AgentSpec) -> gymnasium.Env:
+    """One worker's env: a `TaskEnv` on the train goals, in trials for RL²."""
+    return wrap_for_training(TaskEnv(task, task_file, split="train", privileged=privileged), agent)
 
-    previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-    envs = _build_envs(cur, scheduler.phase, privileged)
-    driver = CurriculumDriver(scheduler, envs, scheduler.phase, cur.phases[scheduler.phase].stages[-1])
-    bar = tqdm(total=total, initial=agent.global_step, unit="step", disable=not progress, dynamic_ncols=True, file=sys.stderr)
-    try:
-        while agent.global_step < until:
-            agent.set_progress(agent.global_step / total)
-            start_step, start_time = agent.global_step, time.perf_counter()
-            agent.collect(envs, driver.on_step)
-            losses = agent.update()
-            sps = (agent.global_step - start_step) / (time.perf_counter() - start_time)
-            episodes, events = driver.drain()
-            for event in events:
-                logger.event(asdict(event))
-                why = ", step budget spent" if event.reason == "budget" else ""
-                bar.write(f"[{agent.global_step:,}] {event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f}{why})")
 
-            per_stage: dict[str, list[bool]] = {}
-            for success, stage in zip(episodes.successes, episodes.stages):
-                per_stage.setdefault(stage, []).append(success)
-            record: dict[str, Any] = {
-                "phase": scheduler.phase,
-                "stage": scheduler.stage,
-                "steps_per_s": sps,
-                "episodes": len(episodes.returns),
-                "return_mean": float(np.mean(episodes.returns)) if episodes.returns else None,
-                "length_mean": float(np.mean(episodes.lengths)) if episodes.lengths else None,
-                "success_rate": float(np.mean(episodes.successes)) if episodes.successes else None,
-                # RL²: success_rate is the trials' last episode (after adapting); this their first
-                "success_first_episode": float(np.mean(episodes.first_successes)) if episodes.first_successes else None,
-                **{f"success/{stage}": float(np.mean(v)) for stage, v in per_stage.items()},
-                **{f"window_success/{k}": v for k, v in scheduler.success_rates().items()},
-                **losses,
-            }
-            if agent.global_step >= next_eval:
-                next_eval += every_eval
-                result = _evaluate_current(agent, cur, scheduler, seed)
-                last_eval = (agent.global_step, result)
-                record.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
-                bar.write(f"[{agent.global_step:,}] eval {result.stage} on {result.split}: success {result.success_rate:.2f}")
-            logger.log(agent.global_step, record)
-            bar.update(agent.global_step - start_step)
-            window = scheduler.success_rates().get(f"{scheduler.phase}/{scheduler.stage}", 0.0)
-            bar.set_postfix_str(f"{scheduler.stage} success {window:.2f} | {sps:,.0f} steps/s")
+class _Session:
+    """One call of `train` from its first update to its last: the loop and what it works on."""
 
-            if scheduler.phase != driver.phase:  # a new task file: new envs, same agent
-                envs.close()
-                envs = _build_envs(cur, scheduler.phase, privileged)
-                driver = CurriculumDriver(scheduler, envs, scheduler.phase, cur.phases[scheduler.phase].stages[-1])
-                agent.reset_envs()
-            last_good = snapshot()
-            if agent.global_step >= next_ckpt:
-                next_ckpt += every_ckpt
-                save_checkpoint(last_good, ckpt_file)
-    except KeyboardInterrupt:
-        save_checkpoint(last_good, ckpt_file)
-        raise Interrupted(last_good["agent"]["global_step"], run_dir) from None
-    finally:
-        bar.close()
-        signal.signal(signal.SIGTERM, previous_term)
-        logger.close()
+    def __init__(self, cur: ResolvedCurriculum, run: RunDir, start: _Start, agent: PPOAgent,
+                 scheduler: CurriculumScheduler, progress: bool):
+        self.cur, self.run_dir, self.agent, self.scheduler = cur, run, agent, scheduler
+        self.seed, self.total, self.config = start.seed, start.total, start.config
+        self.logger = MetricsLogger(run, resume_step=agent.global_step if start.state else None, fresh=start.state is None)
+        self.progress = progress
+        self.bar: tqdm | None = None
+        self.last_eval: tuple[int, StageResult] | None = None
+        self.last_good = self.snapshot()  # what a Ctrl-C saves: the state after the last complete update
+
+    def say(self, line: str) -> None:
+        """A progress line, prefixed with the step (through the bar when there is one)."""
+        line = f"[{self.agent.global_step:,}] {line}"
+        if self.bar is not None:
+            self.bar.write(line)
+        elif self.progress:
+            print(line, file=sys.stderr)
+
+    def snapshot(self) -> dict[str, Any]:
+        return copy.deepcopy({"config": self.config, "agent": self.agent.state_dict(), "curriculum": self.scheduler.state_dict()})
+
+    def build_envs(self) -> tuple[VectorEnv, CurriculumDriver]:
+        """The current phase's training envs (a new phase is a new task file: new envs, same agent)."""
+        phase = self.cur.phases[self.scheduler.phase]
+        privileged = self.cur.agent.asymmetric_critic
+        fns = [partial(_train_env, phase.task, str(phase.task_file), privileged, self.cur.agent)] * self.cur.agent.ppo.num_envs
+        envs = make_vector_env(fns, self.cur.agent.runtime)
+        return envs, CurriculumDriver(self.scheduler, envs, self.scheduler.phase, phase.stages[-1])
+
+    def run(self, until: int) -> None:
+        agent, spec = self.agent, self.cur.spec
+        every_ckpt, every_eval = spec.checkpoint.every_steps, spec.evaluation.every_steps
+        next_ckpt = (agent.global_step // every_ckpt + 1) * every_ckpt
+        next_eval = (agent.global_step // every_eval + 1) * every_eval
+        previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+        envs, driver = self.build_envs()
+        self.bar = tqdm(total=self.total, initial=agent.global_step, unit="step", disable=not self.progress,
+                        dynamic_ncols=True, file=sys.stderr)
         try:
-            envs.close()
-        except Exception:  # workers already gone after a Ctrl-C reached them too
-            pass
-    save_checkpoint(last_good, ckpt_file)
-    if agent.global_step >= total:
-        save_checkpoint({"config": config, "agent": last_good["agent"]}, run_dir / FINAL)
-        _final_evaluation(agent, cur, scheduler, seed, run_dir, last_eval)
-    return run_dir
+            while agent.global_step < until:
+                record = self.update(envs, driver)
+                if agent.global_step >= next_eval:
+                    next_eval += every_eval
+                    result = self.evaluate()
+                    self.last_eval = (agent.global_step, result)
+                    record.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
+                    self.say(f"eval {result.stage} on {result.split}: success {result.success_rate:.2f}")
+                self.logger.log(agent.global_step, record)
+                if self.scheduler.phase != driver.phase:
+                    envs.close()
+                    envs, driver = self.build_envs()
+                    agent.reset_envs()
+                self.last_good = self.snapshot()
+                if agent.global_step >= next_ckpt:
+                    next_ckpt += every_ckpt
+                    save_checkpoint(self.last_good, self.run_dir.checkpoint)
+        except KeyboardInterrupt:
+            save_checkpoint(self.last_good, self.run_dir.checkpoint)
+            raise Interrupted(self.last_good["agent"]["global_step"], self.run_dir.path) from None
+        finally:
+            self.bar.close()
+            self.bar = None
+            signal.signal(signal.SIGTERM, previous_term)
+            self.logger.close()
+            try:
+                envs.close()
+            except Exception:  # workers already gone after a Ctrl-C reached them too
+                pass
+        save_checkpoint(self.last_good, self.run_dir.checkpoint)
+        if agent.global_step >= self.total:
+            save_checkpoint({"config": self.config, "agent": self.last_good["agent"]}, self.run_dir.final)
+            self.final_evaluation()
+
+    def update(self, envs: VectorEnv, driver: CurriculumDriver) -> dict[str, Any]:
+        """Collect one rollout, update once; the update's metrics record."""
+        agent = self.agent
+        agent.set_progress(agent.global_step / self.total)
+        start_step, start_time = agent.global_step, time.perf_counter()
+        agent.collect(envs, driver.on_step)
+        losses = agent.update()
+        sps = (agent.global_step - start_step) / (time.perf_counter() - start_time)
+        episodes, events = driver.drain()
+        for event in events:
+            self.logger.event(asdict(event))
+            why = ", step budget spent" if event.reason == "budget" else ""
+            self.say(f"{event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f}{why})")
+        assert self.bar is not None
+        self.bar.update(agent.global_step - start_step)
+        window = self.scheduler.success_rates().get(f"{self.scheduler.phase}/{self.scheduler.stage}", 0.0)
+        self.bar.set_postfix_str(f"{self.scheduler.stage} success {window:.2f} | {sps:,.0f} steps/s")
+        return {"phase": self.scheduler.phase, "stage": self.scheduler.stage, "steps_per_s": sps,
+                **_episode_metrics(episodes), **{f"window_success/{k}": v for k, v in self.scheduler.success_rates().items()},
+                **losses}
+
+    def evaluate(self, stage: str | None = None) -> StageResult:
+        """The curriculum's `evaluation` settings on `stage` of the current phase (default: the
+        evaluation's stage, else the current one); seeded apart from training."""
+        phase, ev = self.cur.phases[self.scheduler.phase], self.cur.spec.evaluation
+        stage = stage or ev.stage or self.scheduler.stage
+        return evaluate(self.agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=self.seed + 10_000,
+                        stop_on_success=ev.stop_on_success)
+
+    def final_evaluation(self) -> None:
+        """What the run ends with: the final policy on the final stage (`evaluation.stage`, else the
+        phase's last), written to `final_eval.json` for `taskforge train` to print."""
+        stage = self.cur.spec.evaluation.stage or self.cur.phases[self.scheduler.phase].stages[-1]
+        if self.last_eval is not None and self.last_eval[0] == self.agent.global_step and self.last_eval[1].stage == stage:
+            result = self.last_eval[1]  # the periodic evaluation already ran on this very policy
+        else:
+            result = self.evaluate(stage)
+        save_json({"step": self.agent.global_step, **result.as_dict()}, self.run_dir.final_eval)
 
 
-def _final_evaluation(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: CurriculumScheduler, seed: int,
-                      run_dir: Path, last_eval: tuple[int, Any] | None) -> None:
-    """What the run ends with: the evaluation (the curriculum's `evaluation` settings) of the final
-    policy on the final stage (`evaluation.stage`, else the phase's last), written to
-    `final_eval.json` for `taskforge train` to print."""
-    phase = cur.phases[scheduler.phase]
-    stage = cur.spec.evaluation.stage or phase.stages[-1]
-    if last_eval is not None and last_eval[0] == agent.global_step and last_eval[1].stage == stage:
-        result = last_eval[1]  # the periodic evaluation already ran on this very policy
-    else:
-        result = _evaluate_stage(agent, cur, scheduler.phase, stage, seed)
-    save_json({"step": agent.global_step, **result.as_dict()}, run_dir / FINAL_EVAL)
+def _episode_metrics(episodes: EpisodeStats) -> dict[str, Any]:
+    """The episodes finished during one update: means, per-stage success, and each reward term's
+    per-episode sum (`episode_reward/<term>`, what a user tunes a stage's weights with)."""
+    def mean(values: list) -> float | None:
+        return float(np.mean(values)) if values else None
 
-
-def _evaluate_current(agent: PPOAgent, cur: ResolvedCurriculum, scheduler: CurriculumScheduler, seed: int):
-    return _evaluate_stage(agent, cur, scheduler.phase, cur.spec.evaluation.stage or scheduler.stage, seed)
-
-
-def _evaluate_stage(agent: PPOAgent, cur: ResolvedCurriculum, phase_index: int, stage: str, seed: int):
-    """The curriculum's `evaluation` settings on one stage of a phase; seeded apart from training."""
-    phase, ev = cur.phases[phase_index], cur.spec.evaluation
-    return evaluate(agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=seed + 10_000, stop_on_success=ev.stop_on_success)
+    per_stage: dict[str, list[bool]] = {}
+    for success, stage in zip(episodes.successes, episodes.stages):
+        per_stage.setdefault(stage, []).append(success)
+    return {
+        "episodes": len(episodes.returns),
+        "unstable_episodes": episodes.unstable,
+        "return_mean": mean(episodes.returns),
+        "length_mean": mean(episodes.lengths),
+        "success_rate": mean(episodes.successes),
+        # RL²: success_rate is the trials' last episode (after adapting); this their first
+        "success_first_episode": mean(episodes.first_successes),
+        **{f"success/{stage}": float(np.mean(v)) for stage, v in per_stage.items()},
+        **{f"episode_reward/{term}": float(np.mean(v)) for term, v in episodes.reward_terms.items()},
+    }
 
 
 def _raise_keyboard_interrupt(signum, frame) -> None:

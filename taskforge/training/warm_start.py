@@ -31,13 +31,10 @@ from taskforge.agents.bc import fit_exploration_std, pretrain, returns_to_go, sc
 from taskforge.atomic import atomic_write
 from taskforge.demos.labels import ExpertLabels
 from taskforge.envs import ResolvedCurriculum, TaskEnv
+from taskforge.run import RunDir
 from taskforge.spec import SpecError
 from taskforge.spec.curriculum import WarmStartSpec
 from taskforge.training.dagger import DaggerRound, dagger
-
-DEMOS_FILE = "demos.npz"
-DAGGER_FILE = "dagger.npz"
-
 
 @dataclass
 class WarmStart:
@@ -48,20 +45,20 @@ class WarmStart:
     labelled: tuple[np.ndarray, np.ndarray] | None = None
     """DAgger's aggregate beyond the demos (observations, expert actions), kept for `--resume`."""
 
-    def record(self, run_dir: Path, logger) -> None:
+    def record(self, run: RunDir, logger) -> None:
         """After the run directory exists: keep generated demos and DAgger's labels for
         `--resume`, and log the pretraining."""
-        if self.generated and not (run_dir / DEMOS_FILE).exists():
-            demo_io.save(self.demos, run_dir / DEMOS_FILE)
-        if self.labelled is not None and not (run_dir / DAGGER_FILE).exists():
+        if self.generated and (self.metrics is not None or not run.demos.exists()):
+            demo_io.save(self.demos, run.demos)
+        if self.labelled is not None and (self.metrics is not None or not run.dagger.exists()):
             obs, act = self.labelled
-            atomic_write(run_dir / DAGGER_FILE, lambda f: np.savez_compressed(f, observations=obs, actions=act))
+            atomic_write(run.dagger, lambda f: np.savez_compressed(f, observations=obs, actions=act))
         if self.metrics is not None:
             logger.log(int(self.metrics["expert_steps"]), self.metrics)
 
 
 def prepare_warm_start(
-    cur: ResolvedCurriculum, agent: PPOAgent, run_dir: Path, seed: int, resumed: bool, progress: bool
+    cur: ResolvedCurriculum, agent: PPOAgent, run: RunDir, seed: int, resumed: bool, progress: bool
 ) -> WarmStart | None:
     """Load or generate the demos and apply them to `agent` (see the module doc); writes no file.
     Bad demos (wrong stage or observation size, no successful episode) are a `SpecError` at
@@ -69,14 +66,14 @@ def prepare_warm_start(
     ws = cur.spec.warm_start
     if ws is None:
         return None
-    demos, generated = _demonstrations(cur, ws, run_dir, seed, resumed, progress)
+    demos, generated = _demonstrations(cur, ws, run, seed, resumed, progress)
     size = agent.obs_normalizer.rms.mean.shape[0]
     if demos.observations.shape[1] != size:
         where = "warm_start.demos" if ws.demos else "warm_start.phase"
         raise SpecError.single(cur.file, where, f"demo observations have {demos.observations.shape[1]} floats; the policy reads {size}")
 
     if resumed:  # the checkpoint holds the pretrained networks; only the BC term is not saved in it
-        labelled = _load_labelled(run_dir / DAGGER_FILE)
+        labelled = _load_labelled(run.dagger)
         observations, actions = _aggregate(demos, labelled)
         if ws.regularizer.weight > 0:
             agent.set_demo_regularizer(observations, actions, ws.regularizer.weight, ws.regularizer.decay)
@@ -117,10 +114,10 @@ def prepare_warm_start(
 
 
 def _demonstrations(
-    cur: ResolvedCurriculum, ws: WarmStartSpec, run_dir: Path, seed: int, resumed: bool, progress: bool
+    cur: ResolvedCurriculum, ws: WarmStartSpec, run: RunDir, seed: int, resumed: bool, progress: bool
 ) -> tuple[demo_io.Demos, bool]:
     """The demos file, the demos a resumed run saved, or newly recorded scripted episodes."""
-    saved = run_dir / DEMOS_FILE
+    saved = run.demos
     if ws.demos is not None:
         try:
             demos = demo_io.load(cur.demos_file)

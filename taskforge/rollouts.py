@@ -1,6 +1,7 @@
-"""Evaluation of a policy on a stage of a task, goal by goal, in trials: deterministic (the
-Gaussian's mean) by default, or sampled, since an RL² policy explores by sampling (Duan et al.
-meta-test their stochastic policy).
+"""Rollouts of a policy on a stage of a task, goal by goal, in trials: the measurement that
+training's periodic evaluation and `taskforge eval` both make (so it lives below both; neither
+imports the other). Deterministic (the Gaussian's mean) by default, or sampled, since an RL²
+policy explores by sampling (Duan et al. meta-test their stochastic policy).
 
 A trial is K episodes on one goal from a fresh recurrent state (`RL2Trial`): K is the RL² agent's
 `trial_episodes`, or 1 for a memoryless PPO policy unless asked otherwise (K > 1 for PPO is the
@@ -11,6 +12,7 @@ process, batched through the policy; trial k uses goal `k mod number-of-goals` o
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,8 +21,23 @@ import numpy as np
 from taskforge.agents import PPOAgent, RL2Trial
 from taskforge.backends import Split
 from taskforge.envs import TaskEnv
-from taskforge.evaluation.stats import wilson_interval
 from taskforge.spec import TaskSpec
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """95 % Wilson score interval (Wilson, 1927) for a binomial proportion.
+
+    Why Wilson and not p ± z·sqrt(p(1-p)/n): with 20 episodes and 0 or 20 successes the normal
+    interval collapses to a point; Wilson stays honest at the extremes.
+    """
+    if n == 0:
+        return (0.0, 1.0)
+    p = successes / n
+    denom = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denom
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
+    # clamped to contain p: at p = 0 or 1 rounding would otherwise leave it a hair outside
+    return (min(p, max(0.0, centre - half)), max(p, min(1.0, centre + half)))
 
 
 def _rate(successes: np.ndarray) -> dict:

@@ -1,0 +1,68 @@
+"""What every MuJoCo backend computes the same way: the stage's goal override, the grasp test,
+the distance features, and whether the simulation has blown up. One copy, so the backends cannot
+drift apart (they had: only one grasp test skipped contacts without a constraint row)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Collection
+
+import mujoco
+import numpy as np
+
+from taskforge.backends.base import GoalOverride
+
+_DIVERGENCE_WARNINGS = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)]
+
+
+def override_goal(goal: np.ndarray, rest: np.ndarray, override: GoalOverride) -> np.ndarray:
+    """The goal a stage asks for (`GoalOverrideSpec`): its horizontal distance from the object's
+    resting place scaled, its height kept, set to the object's or to a number."""
+    out = np.array(goal, dtype=float)
+    out[:2] = rest[:2] + override.distance_scale * (out[:2] - rest[:2])
+    if override.height == "object":
+        out[2] = rest[2]
+    elif override.height != "keep":
+        out[2] = float(override.height)
+    return out
+
+
+def pads_press(data: mujoco.MjData, obj: int | None, left: Collection[int], right: Collection[int]) -> float:
+    """1.0 when a geom of each finger pushes on the object with positive normal force (Meta-World's
+    `touching_object`). A contact without a constraint row (`efc_address` -1: excluded or not yet
+    active) pushes nothing. A plain loop over the few contacts: cheaper than numpy reductions and
+    Meta-World's per-contact struct access at this size; it runs every step."""
+    if obj is None or data.ncon == 0:
+        return 0.0
+    contact = data.contact
+    efc_force, efc_address = data.efc_force, contact.efc_address
+    touch_left = touch_right = False
+    for k, (g1, g2) in enumerate(contact.geom.tolist()):
+        other = g2 if g1 == obj else g1 if g2 == obj else -1
+        if other < 0 or not (other in left or other in right):
+            continue
+        adr = efc_address[k]
+        if adr >= 0 and efc_force[adr] > 0:
+            if other in left:
+                touch_left = True
+            else:
+                touch_right = True
+    return float(touch_left and touch_right)
+
+
+def distances(tcp: list[float], obj: list[float], goal: list[float]) -> dict[str, float]:
+    """The three distance features, on plain floats (numpy's per-call overhead dominates at
+    this size)."""
+    return {
+        "object_to_goal_distance": math.dist(obj, goal),
+        "tcp_to_object_distance": math.dist(tcp, obj),
+        "tcp_to_goal_distance": math.dist(tcp, goal),
+    }
+
+
+def diverged(data: mujoco.MjData) -> bool:
+    """The simulation blew up since the last reset: MuJoCo flagged a bad acceleration, position or
+    velocity (it then silently resets the state, so the episode goes on from nonsense), or the
+    velocities are no longer finite (positions: the env checks the observation). Extreme randomisation or actions can cause it; the env ends the
+    episode instead of learning from it."""
+    return bool(data.warning.number[_DIVERGENCE_WARNINGS].any()) or not math.isfinite(data.qvel.sum())  # NaN/inf if any entry is
