@@ -18,6 +18,7 @@ train: setup
 	$(VENV)/bin/taskforge train $(CURRICULUM) $(ARGS)
 
 test: setup
+	$(VENV)/bin/ruff check taskforge tests benchmarks
 	$(VENV)/bin/pytest -q
 
 .PHONY: setup train test

@@ -25,9 +25,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import RESULTS, print_table, versions, write_result  # noqa: E402
 from taskforge.backends.gymnasium_env import TEST_SEED_OFFSET  # noqa: E402
+from taskforge.run import RunDir  # noqa: E402
 from taskforge.spec import load_agent_spec  # noqa: E402
 from taskforge.training import train  # noqa: E402
-from taskforge.run import RunDir  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CURRICULUM = ROOT / "curricula/lunar_lander.yaml"

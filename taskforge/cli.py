@@ -11,7 +11,6 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-
 from taskforge.spec import SpecError, SpecIssue, expected_one_of, read_yaml_with_base
 
 EXIT_USAGE = 2

@@ -17,7 +17,6 @@ import torch
 from taskforge.agents import PPOAgent, make_vector_env, ppo_loss
 from taskforge.spec.agent import AgentSpec
 
-
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 

@@ -16,9 +16,9 @@ from taskforge.agents import PPOAgent, make_vector_env
 from taskforge.agents.bc import fit_exploration_std
 from taskforge.demos.labels import EXPERT_ACTION, ExpertLabels
 from taskforge.envs import TaskEnv, load_task
+from taskforge.run import read_jsonl
 from taskforge.training import train
 from taskforge.training.dagger import student_rollout
-from taskforge.run import read_jsonl
 from tests.conftest import PICK_PLACE
 from tests.test_agents_ppo import SMALL_PPO, agent_spec, pendulum_envs
 

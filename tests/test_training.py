@@ -17,8 +17,8 @@ import torch
 import yaml
 
 from taskforge.cli import main
-from taskforge.training import train
 from taskforge.run import load_checkpoint, read_jsonl
+from taskforge.training import train
 from tests.conftest import ROOT
 
 # Pendulum is a fast stand-in simulator; the curriculum logic is the same for every backend.
@@ -114,7 +114,8 @@ def test_stop_at_pauses_without_bending_the_learning_rate_schedule(tmp_path, cap
     assert main(["train", str(cur), "--run-dir", str(run), "--resume", "--no-progress"]) == 0
     assert (run / "final.pt").is_file()
     # the schedule spans the whole run in both: annealing is not restarted per chunk
-    lr = lambda d: [(m["step"], m["learning_rate"]) for m in read_jsonl(d / "metrics.jsonl")]
+    def lr(d):
+        return [(m["step"], m["learning_rate"]) for m in read_jsonl(d / "metrics.jsonl")]
     assert lr(run) == lr(whole)
     assert main(["train", str(cur), "--run-dir", str(tmp_path / "bad"), "--stop-at", "0"]) == 2
     assert "--stop-at" in capsys.readouterr().err and not (tmp_path / "bad").exists()

@@ -18,8 +18,8 @@ from taskforge.cli import main
 from taskforge.demos import Demos, generate, save
 from taskforge.envs import load_curriculum, load_task
 from taskforge.rollouts import evaluate
-from taskforge.training import train
 from taskforge.run import read_jsonl
+from taskforge.training import train
 from tests.conftest import PICK_PLACE
 from tests.test_agents_ppo import SMALL_PPO, agent_spec, make_agent, pendulum_envs
 from tests.test_training import AGENT, TASK

@@ -16,7 +16,7 @@ import taskforge
 from taskforge import SpecError
 from taskforge.backends.xarm7 import GOAL_SLICE, OBS_SIZE
 from taskforge.backends.xarm7_control import R_DOWN
-from taskforge.backends.xarm7_scene import make_goal_sets
+from taskforge.backends.xarm7_scene import BUILTIN_ROBOT, make_goal_sets
 from taskforge.envs.factory import check_task_file
 from tests.conftest import TASKS
 
@@ -382,7 +382,7 @@ def test_variants_change_the_model_as_intended():
 
 
 def test_composed_scene_matches_the_reference_scene_xml():
-    ref = mujoco.MjModel.from_xml_path(str(XARM / "scene.xml"))  # the documented reference scene
+    ref = mujoco.MjModel.from_xml_path(str(BUILTIN_ROBOT.parent / "scene.xml"))  # the documented reference scene
     env = taskforge.make(PICK_PLACE, seed=0)
     env.unwrapped._randomizers["xarm7"].restore()
     m = env.unwrapped.backend.model("xarm7")
@@ -416,7 +416,7 @@ def test_robot_model_path_is_relative_to_the_task_file_and_keeps_its_meshdir(tmp
     for face in faces:
         stl += struct.pack("<3f", 0, 0, 0) + b"".join(struct.pack("<3f", *corners[i]) for i in face) + b"\0\0"
     (tmp_path / "robot" / "assets" / "tet.stl").write_bytes(stl)
-    xml = (XARM / "xarm7.xml").read_text()
+    xml = BUILTIN_ROBOT.read_text()
     xml = xml.replace('autolimits="true"/>', 'autolimits="true" meshdir="assets"/>', 1)
     xml = xml.replace("<asset>", '<asset><mesh file="tet.stl"/>', 1)
     xml = xml.replace('<geom name="link1_geom"', '<geom name="link1_mesh" type="mesh" mesh="tet"/><geom name="link1_geom"', 1)

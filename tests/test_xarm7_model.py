@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-ROBOT_XML = ROOT / "tasks" / "xarm7" / "xarm7.xml"
-SCENE_XML = ROOT / "tasks" / "xarm7" / "scene.xml"
+ROBOT_XML = ROOT / "taskforge" / "backends" / "assets" / "xarm7" / "xarm7.xml"
+SCENE_XML = ROBOT_XML.parent / "scene.xml"
 # Menagerie's xArm7 description (mesh-free loader), beside the repository; optional.
 REFERENCE_DIR = Path(__file__).resolve().parents[2] / "shared/reference/ufactory_xarm7"
 

@@ -351,7 +351,7 @@ class PPOAgent:
         if demos is not None:
             bc_weight = demos.weight_at(self.num_updates - self.critic_warmup_until)  # decays from the first actor update
             demo_obs = self.obs_normalizer(demos.observations, update=False)
-        for epochs in range(1, ppo.update_epochs + 1):
+        for epochs in range(1, ppo.update_epochs + 1):  # noqa: B007 (read after the loop: epochs run)
             for mb in self.buffer.minibatches(ppo.num_minibatches, self.generator, self.policy.recurrent):
                 loss = ppo_loss(self.policy, mb, ppo, self.generator, train_actor)
                 total = loss.total

@@ -46,7 +46,7 @@ _MIN_OBJECT_GOAL_XY = 0.15
 far apart horizontally. Closer, its reset loops forever on a frozen task vector."""
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def ml1_goals(env_name: str, seed: int) -> tuple[tuple[Task, ...], tuple[Task, ...]]:
     """ML1's (train, test) tasks.
 
@@ -248,7 +248,7 @@ def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
     return issues
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _task_vec_size(env_name: str) -> int:
     env = ALL_V3_ENVIRONMENTS[env_name]()
     size = int(env._random_reset_space.low.size)

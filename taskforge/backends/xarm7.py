@@ -2,8 +2,8 @@
 
 Scene and robot
   The backend composes its own scene with `mujoco.MjSpec` (`xarm7_scene.build_scene`): a table
-  whose top is at `table_height` (default 0, the world plane of `tasks/xarm7/scene.xml`), the
-  robot from `robot_model` (default the built-in `tasks/xarm7/xarm7.xml`) standing where its file
+  whose top is at `table_height` (default 0, the world plane of `taskforge/backends/assets/xarm7/scene.xml`), the
+  robot from `robot_model` (default the built-in `taskforge/backends/assets/xarm7/xarm7.xml`) standing where its file
   puts `link_base` (z = 0.12) on a pedestal that reaches down to the table, the cube (`cube.size`
   half-side, `cube.mass`), a goal marker (mocap body `goal` with a visual-only site), two lights
   and the cameras `front`, `top`, `side`. `model()` returns this compiled model; the env's

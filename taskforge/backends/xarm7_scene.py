@@ -1,9 +1,9 @@
 """The xArm7 backend's world: the scene composed around a robot MJCF with `mujoco.MjSpec`, the
 IK-only robot model, and the train/test goal sets.
 
-The scene is built here rather than read from `tasks/xarm7/scene.xml` so that a task variant
+The scene is built here rather than read from `taskforge/backends/assets/xarm7/scene.xml` so that a task variant
 changes the table height, the cube and the regions with YAML only, and so that any robot file
-with the names below (taskforge's `tasks/xarm7/xarm7.xml` or MuJoCo Menagerie's
+with the names below (taskforge's `taskforge/backends/assets/xarm7/xarm7.xml` or MuJoCo Menagerie's
 `ufactory_xarm7/xarm7.xml`) can be dropped in. With the defaults the compiled scene equals
 `scene.xml` in everything the backend uses (physics options, table top at z = 0, robot base at
 z = 0.12 on a pedestal, 4 cm 0.1 kg cube, goal mocap, cameras `front`/`top`/`side`).
@@ -22,7 +22,7 @@ from taskforge.spec.task import XArm7BackendSpec
 
 # The repository's tasks/ folder, beside the taskforge package (a source checkout or an editable
 # install; tasks/ is not part of the built package).
-BUILTIN_ROBOT = Path(__file__).resolve().parents[2] / "tasks" / "xarm7" / "xarm7.xml"
+BUILTIN_ROBOT = Path(__file__).resolve().parent / "assets" / "xarm7" / "xarm7.xml"  # package data
 
 ARM_JOINTS = tuple(f"joint{i}" for i in range(1, 8))
 ARM_ACTUATORS = tuple(f"act{i}" for i in range(1, 8))

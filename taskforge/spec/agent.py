@@ -26,7 +26,7 @@ class PolicySpec(StrictModel):
     init_log_std: float = Field(default=0.0, ge=-5.0, le=2.0)
 
     @model_validator(mode="after")
-    def _positive_sizes(self) -> "PolicySpec":
+    def _positive_sizes(self) -> PolicySpec:
         if any(h < 1 for h in self.hidden_sizes):
             raise ValueError(f"'hidden_sizes' must all be >= 1 (got {self.hidden_sizes})")
         return self
@@ -62,7 +62,7 @@ class PPOSpec(StrictModel):
         return self.num_envs * (self.rollout_steps // (self.bptt_length or self.rollout_steps))
 
     @model_validator(mode="after")
-    def _minibatches_fit(self) -> "PPOSpec":
+    def _minibatches_fit(self) -> PPOSpec:
         batch = self.num_envs * self.rollout_steps
         if self.num_minibatches > batch:
             raise ValueError(
@@ -115,7 +115,7 @@ class AgentSpec(StrictModel):
         return self.rl2.trial_episodes if self.rl2 is not None else 1
 
     @model_validator(mode="after")
-    def _consistent(self) -> "AgentSpec":
+    def _consistent(self) -> AgentSpec:
         ppo = self.ppo
         if self.policy.type != "mlp" and ppo.num_minibatches > ppo.num_sequences:
             raise ValueError(

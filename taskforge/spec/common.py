@@ -8,7 +8,6 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 
-
 class StrictModel(BaseModel):
     """Base of every schema model: unknown keys are errors, values are not coerced silently."""
 
@@ -30,7 +29,7 @@ class Distribution(StrictModel):
     std: float | None = Field(default=None, ge=0.0)
 
     @model_validator(mode="after")
-    def _check_parameters(self) -> "Distribution":
+    def _check_parameters(self) -> Distribution:
         if self.dist in ("uniform", "loguniform"):
             if self.low is None or self.high is None:
                 raise ValueError(f"a {self.dist} distribution needs 'low' and 'high'")

@@ -25,7 +25,7 @@ class PromotionSpec(StrictModel):
     (event `promote` with reason `budget`); default none (wait for the threshold)."""
 
     @model_validator(mode="after")
-    def _budget_above_floor(self) -> "PromotionSpec":
+    def _budget_above_floor(self) -> PromotionSpec:
         if self.max_steps is not None and self.max_steps < self.min_steps:
             raise ValueError(f"'max_steps' ({self.max_steps}) must be >= 'min_steps' ({self.min_steps})")
         return self
@@ -129,7 +129,7 @@ class FineTuneSpec(StrictModel):
     rollouts would otherwise shift them and with them the pretrained behaviour."""
 
     @model_validator(mode="after")
-    def _std_range(self) -> "FineTuneSpec":
+    def _std_range(self) -> FineTuneSpec:
         if self.std_min > self.std_max:
             raise ValueError(f"'std_min' ({self.std_min}) must be <= 'std_max' ({self.std_max})")
         if isinstance(self.exploration_std, float) and self.exploration_std <= 0:
@@ -159,7 +159,7 @@ class WarmStartSpec(StrictModel):
     fine_tune: FineTuneSpec = FineTuneSpec()
 
     @model_validator(mode="after")
-    def _one_source(self) -> "WarmStartSpec":
+    def _one_source(self) -> WarmStartSpec:
         if (self.demos is None) == (self.generate_episodes is None):
             raise ValueError("give exactly one of 'demos' (a file) and 'generate_episodes' (a number)")
         return self

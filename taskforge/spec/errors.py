@@ -38,7 +38,7 @@ class SpecError(Exception):
         super().__init__("\n".join(str(i) for i in self.issues))
 
     @classmethod
-    def single(cls, file: str | Path, path: str, message: str) -> "SpecError":
+    def single(cls, file: str | Path, path: str, message: str) -> SpecError:
         return cls([SpecIssue(str(file), path, message)])
 
 

@@ -37,7 +37,7 @@ class MetaWorldBackendSpec(StrictModel):
         return self.env if self.env else f"task set {self.task_set}"
 
     @model_validator(mode="after")
-    def _one_source(self) -> "MetaWorldBackendSpec":
+    def _one_source(self) -> MetaWorldBackendSpec:
         if (self.env is None) == (self.task_set is None):
             raise ValueError("give exactly one of 'env' (one environment) or 'task_set' (e.g. mt10)")
         return self
@@ -73,7 +73,7 @@ def _check_intervals(model: StrictModel, names: tuple[str, ...]) -> None:
 class XArm7PadGeomsSpec(StrictModel):
     """The finger-pad geoms that must both press on the cube for `object_grasped`.
 
-    Defaults are taskforge's model (`tasks/xarm7/xarm7.xml`). MuJoCo Menagerie's
+    Defaults are taskforge's model (`taskforge/backends/assets/xarm7/xarm7.xml`). MuJoCo Menagerie's
     `ufactory_xarm7/xarm7.xml` has two pad boxes per finger:
     `{left: [left_finger_pad_1, left_finger_pad_2], right: [right_finger_pad_1, right_finger_pad_2]}`.
     """
@@ -93,7 +93,7 @@ class XArm7WorkspaceSpec(StrictModel):
     z: Interval = (0.005, 0.40)
 
     @model_validator(mode="after")
-    def _ordered(self) -> "XArm7WorkspaceSpec":
+    def _ordered(self) -> XArm7WorkspaceSpec:
         _check_intervals(self, ("x", "y", "z"))
         return self
 
@@ -152,7 +152,7 @@ class XArm7ControlSpec(StrictModel):
     """Joint mode, `delta`: joint-target change (rad) per control step at action 1."""
 
     @model_validator(mode="after")
-    def _timing(self) -> "XArm7ControlSpec":
+    def _timing(self) -> XArm7ControlSpec:
         if self.substeps is not None and self.timestep is not None:
             raise ValueError("give at most one of 'substeps' and 'timestep' (the other follows from frequency_hz)")
         ts = self.physics_timestep
@@ -198,7 +198,7 @@ class XArm7ObjectRegionSpec(StrictModel):
     y: Interval = (-0.25, 0.25)
 
     @model_validator(mode="after")
-    def _ordered(self) -> "XArm7ObjectRegionSpec":
+    def _ordered(self) -> XArm7ObjectRegionSpec:
         _check_intervals(self, ("x", "y"))
         return self
 
@@ -211,7 +211,7 @@ class XArm7GoalRegionSpec(StrictModel):
     z: Interval = (0.05, 0.30)
 
     @model_validator(mode="after")
-    def _ordered(self) -> "XArm7GoalRegionSpec":
+    def _ordered(self) -> XArm7GoalRegionSpec:
         _check_intervals(self, ("x", "y", "z"))
         return self
 
@@ -228,7 +228,7 @@ class XArm7GoalSplitSpec(StrictModel):
     """Distance (m) a goal keeps from its cell's faces; must be < cell / 2."""
 
     @model_validator(mode="after")
-    def _margin(self) -> "XArm7GoalSplitSpec":
+    def _margin(self) -> XArm7GoalSplitSpec:
         if self.margin * 2 >= self.cell:
             raise ValueError(f"'margin' ({self.margin:g}) must be < cell / 2 ({self.cell / 2:g})")
         return self
@@ -246,7 +246,7 @@ class XArm7BackendSpec(StrictModel):
     type: Literal["xarm7"]
     robot_model: str | None = None
     """MJCF file of the robot, relative to the task file; null = taskforge's built-in
-    `tasks/xarm7/xarm7.xml`. Menagerie's `ufactory_xarm7/xarm7.xml` (with its meshes) works as
+    `taskforge/backends/assets/xarm7/xarm7.xml`. Menagerie's `ufactory_xarm7/xarm7.xml` (with its meshes) works as
     is; set `pad_geoms` for it. The file must have joints `joint1..7`, position actuators
     `act1..7` and `gripper` (0 = open .. 255 = closed, on a tendon), site `link_tcp`, and a
     `home` keyframe (else the arm starts at qpos 0)."""
@@ -305,7 +305,7 @@ class ConditionSpec(StrictModel):
     above: float | None = None
 
     @model_validator(mode="after")
-    def _has_bound(self) -> "ConditionSpec":
+    def _has_bound(self) -> ConditionSpec:
         if self.below is None and self.above is None:
             raise ValueError("a condition needs 'below' and/or 'above'")
         if self.below is not None and self.above is not None and self.above >= self.below:
@@ -378,7 +378,7 @@ class LatencySpec(StrictModel):
     max_steps: int = Field(default=0, ge=0, le=50)
 
     @model_validator(mode="after")
-    def _ordered(self) -> "LatencySpec":
+    def _ordered(self) -> LatencySpec:
         if self.min_steps > self.max_steps:
             raise ValueError(f"'min_steps' ({self.min_steps}) must be <= 'max_steps' ({self.max_steps})")
         return self

@@ -8,11 +8,10 @@ fill it after each step; the env adds `action` and `stage_success`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Union
 
 import numpy as np
 
-FeatureValue = Union[float, np.ndarray]
+FeatureValue = float | np.ndarray
 Features = dict[str, FeatureValue]
 
 

@@ -36,6 +36,7 @@ from taskforge.spec import SpecError
 from taskforge.spec.curriculum import WarmStartSpec
 from taskforge.training.dagger import DaggerRound, dagger
 
+
 @dataclass
 class WarmStart:
     demos: demo_io.Demos
