@@ -17,12 +17,11 @@ import mujoco
 import numpy as np
 
 from taskforge.agents import RL2Trial, wrap_for_training
+from taskforge.backends import BACKENDS
 from taskforge.demos import scripted_policy
 from taskforge.envs import TaskEnv, load_task
 from taskforge.run import load_run
 from taskforge.spec import SpecError
-
-DEFAULT_CAMERAS = {"metaworld": "corner", "xarm7": "front"}
 
 
 @dataclass
@@ -99,7 +98,7 @@ def render_episodes(
         raise SpecError.single(task_env.file, "backend.type", f"rendering needs a MuJoCo backend, not {task_env.task.backend.type}")
     if out.suffix.lower() not in (".gif", ".mp4"):
         raise SpecError.single(out, "", "expected an output file ending in .gif or .mp4")
-    camera = camera or DEFAULT_CAMERAS.get(task_env.task.backend.type)
+    camera = camera or BACKENDS[task_env.task.backend.type].camera
     frames, successes = [], []
     renderer: mujoco.Renderer | None = None
     for k in range(episodes):

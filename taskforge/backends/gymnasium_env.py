@@ -18,7 +18,8 @@ from gymnasium.spaces import Box
 
 from taskforge.backends.base import GoalOverride, Split
 from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
-from taskforge.spec.task import GoalsSpec, GymnasiumBackendSpec
+from taskforge.spec.backends import GymnasiumBackendSpec
+from taskforge.spec.task import GoalsSpec
 from taskforge.terms import Features
 
 PROVIDES = frozenset({"native_reward", "native_success", "native_return"})

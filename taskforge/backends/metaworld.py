@@ -31,7 +31,8 @@ from taskforge.atomic import atomic_write
 from taskforge.backends.base import GoalOverride, Split, draw_starts_apart
 from taskforge.backends.mujoco_common import distances, override_goal, pads_press
 from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
-from taskforge.spec.task import GoalsSpec, MetaWorldBackendSpec
+from taskforge.spec.backends import MetaWorldBackendSpec
+from taskforge.spec.task import GoalsSpec
 from taskforge.terms import ENV_FEATURES, FEATURES, Features
 
 TASK_SETS: dict[str, list[str]] = {"mt10": list(MT10_V3)}

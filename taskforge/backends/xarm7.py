@@ -110,7 +110,8 @@ from taskforge.backends.xarm7_scene import (
     robot_path,
 )
 from taskforge.spec import SpecIssue, TaskSpec, did_you_mean
-from taskforge.spec.task import GoalsSpec, XArm7BackendSpec
+from taskforge.spec.backends import XArm7BackendSpec
+from taskforge.spec.task import GoalsSpec
 from taskforge.terms import ENV_FEATURES, FEATURES, Features
 
 PROVIDES = frozenset(FEATURES) - ENV_FEATURES

@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from taskforge.backends.base import draw_starts_apart
-from taskforge.spec.task import XArm7BackendSpec
+from taskforge.spec.backends import XArm7BackendSpec
 
 # The repository's tasks/ folder, beside the taskforge package (a source checkout or an editable
 # install; tasks/ is not part of the built package).

@@ -24,8 +24,9 @@ Conventions (Meta-World's, checked in `SawyerXYZEnv.step`: the gripper actuators
 `dx, dy, dz` in `[-1, 1]` are the backend's Cartesian step (Meta-World: 1 cm per unit per step;
 xArm7: `control.max_step_m`); `grip` is **-1 open, +1 close**.
 
-Adding a backend: one entry in `_REGISTRY` below (backends may not import this package), or at
-run time
+Which backends the planner drives is read from their record (`taskforge.backends.BACKENDS`,
+`cartesian_actions`), with the default numbers; a backend's own scripted policy is an entry of
+`_NATIVE` below. Other numbers or another policy, at run time:
 
     from taskforge.demos import PlannerConfig, register_backend
     register_backend("mybackend", planner=PlannerConfig(gain=5.0, hover=0.1))
@@ -47,6 +48,7 @@ from typing import TYPE_CHECKING, Literal, Protocol
 
 import numpy as np
 
+from taskforge.backends import BACKENDS
 from taskforge.spec import SpecError, expected_one_of
 
 if TYPE_CHECKING:
@@ -281,26 +283,27 @@ def _metaworld_native(env: TaskEnv, stage: str) -> ScriptedPolicy | None:
 NativeFactory = Callable[["TaskEnv", str], "ScriptedPolicy | None"]
 
 
-@dataclass(frozen=True)
-class BackendPolicies:
-    native: NativeFactory | None = None
-    """The backend's own scripted policy for a stage's full task, or None when it has none."""
-    planner: PlannerConfig | None = None
-    """The waypoint planner's numbers, for a backend with 4-D Cartesian + gripper actions."""
-
-
-_REGISTRY: dict[str, BackendPolicies] = {
-    "metaworld": BackendPolicies(native=_metaworld_native, planner=PlannerConfig()),
-    # xArm7 in `control.mode: cartesian` shares the action convention; Meta-World's numbers work
-    # as they are (measured: 20/20 episodes on each stage of tasks/xarm7/pick_place.yaml). In
-    # joint mode its action is 8-D, which `scripted_policy` refuses.
-    "xarm7": BackendPolicies(planner=PlannerConfig()),
-}
+_NATIVE: dict[str, NativeFactory] = {"metaworld": _metaworld_native}
+"""A backend's own scripted policies, by backend type."""
+_PLANNERS: dict[str, PlannerConfig] = {}
+"""Planner numbers other than the defaults, by backend type (`register_backend`). Meta-World's
+numbers work on the xArm7 in `control.mode: cartesian` as they are (measured: 20/20 episodes on
+each stage of tasks/xarm7/pick_place.yaml)."""
 
 
 def register_backend(backend_type: str, native: NativeFactory | None = None, planner: PlannerConfig | None = None) -> None:
-    """Make `scripted_policy` work for a backend type (see the module doc)."""
-    _REGISTRY[backend_type] = BackendPolicies(native, planner)
+    """Make `scripted_policy` work for a backend type, or change its numbers (see the module doc)."""
+    if native is not None:
+        _NATIVE[backend_type] = native
+    if planner is not None:
+        _PLANNERS[backend_type] = planner
+
+
+def _planner_config(backend_type: str) -> PlannerConfig | None:
+    if backend_type in _PLANNERS:
+        return _PLANNERS[backend_type]
+    info = BACKENDS.get(backend_type)
+    return PlannerConfig() if info is not None and info.cartesian_actions else None
 
 
 def scripted_policy(env: TaskEnv, stage: str | None = None, source: Source = "auto") -> ScriptedPolicy:
@@ -314,17 +317,17 @@ def scripted_policy(env: TaskEnv, stage: str | None = None, source: Source = "au
     if stage not in env.stages:
         raise SpecError.single(env.file, "stage", f"no stage '{stage}'; {expected_one_of(stage, env.stages)}")
     backend_type = env.task.backend.type
-    entry = _REGISTRY.get(backend_type, BackendPolicies())
+    native, planner = _NATIVE.get(backend_type), _planner_config(backend_type)
     last = stage == env.task.stages[-1].name
-    if source in ("auto", "native") and entry.native is not None and (last or source == "native"):
-        policy = entry.native(env, stage)
+    if source in ("auto", "native") and native is not None and (last or source == "native"):
+        policy = native(env, stage)
         if policy is not None:
             return policy
     if source == "native":
         raise SpecError.single(env.file, "backend", f"the {backend_type} backend has no scripted policy for this task")
-    if entry.planner is None or env.action_space.shape != (4,):
+    if planner is None or env.action_space.shape != (4,):
         raise SpecError.single(
             env.file, "backend", f"no scripted policy for the {backend_type} backend; demonstrations need a "
             "backend with 4-D Cartesian actions or a registered policy (taskforge/demos/policies.py)",
         )
-    return WaypointPlanner(infer_behaviour(env, stage), entry.planner)
+    return WaypointPlanner(infer_behaviour(env, stage), planner)

@@ -12,9 +12,10 @@ import yaml
 from pydantic import BaseModel, ValidationError
 
 from taskforge.spec.agent import AgentSpec
+from taskforge.spec.backends import BACKEND_TYPES
 from taskforge.spec.curriculum import CurriculumSpec
 from taskforge.spec.errors import SpecError, issues_from_validation
-from taskforge.spec.task import BACKEND_TYPES, TaskSpec
+from taskforge.spec.task import TaskSpec
 
 M = TypeVar("M", bound=BaseModel)
 
