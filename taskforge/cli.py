@@ -176,6 +176,21 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_schema(args: argparse.Namespace) -> int:
+    import json
+
+    from taskforge.atomic import atomic_write
+    from taskforge.spec.schema import json_schema
+
+    text = json.dumps(json_schema(args.kind), indent=2) + "\n"
+    if args.out:
+        atomic_write(Path(args.out), lambda f: f.write(text.encode()))
+        print(f"wrote {args.out}")
+    else:
+        print(text, end="")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="taskforge", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -251,6 +266,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "(success per episode of the trial, e.g. RL² next to PPO)")
     p.add_argument("--out", help="default: RUN_DIR/curves.png, or adaptation.png beside the first report")
     p.set_defaults(func=cmd_plot)
+
+    p = sub.add_parser("schema", help="JSON Schema of task, agent or curriculum files, for editors")
+    p.add_argument("kind", choices=["task", "agent", "curriculum"])
+    p.add_argument("--out", help="write it here instead of printing it")
+    p.set_defaults(func=cmd_schema)
     return parser
 
 
