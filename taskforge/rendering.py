@@ -77,6 +77,21 @@ def _make_renderer(model: mujoco.MjModel, height: int, width: int, out: Path) ->
         raise SpecError.single(out, "", f"no OpenGL context for rendering (MUJOCO_GL={backend}: {str(exc).splitlines()[0]}); {hint}") from None
 
 
+def upright_frame(renderer: mujoco.Renderer, data: mujoco.MjData, camera: str | None) -> np.ndarray:
+    """One frame from `camera` (None: the free camera) with the world's up at the top.
+
+    A camera whose image "up" (its y axis) points down in the world renders the scene upside
+    down: Meta-World's `corner` cameras are such, defined for mujoco-py, which read pixels
+    bottom-up. Their frames are turned 180° (not flipped, which would mirror them)."""
+    renderer.update_scene(data, camera=camera if camera is not None else -1)
+    frame = renderer.render()
+    if camera is not None:
+        cam = mujoco.mj_name2id(renderer.model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+        if data.cam_xmat[cam][7] < 0:  # row-major 3x3: [7] is the z component of the y axis
+            return frame[::-1, ::-1].copy()
+    return frame.copy()
+
+
 def render_episodes(
     env: TaskEnv | RL2Trial,
     act: Callable[[np.ndarray, bool], np.ndarray],
@@ -111,8 +126,7 @@ def render_episodes(
                 raise SpecError.single(task_env.file, "camera", f"no camera '{camera}'; expected one of {', '.join(cams)}")
         start, done, ever, info = True, False, False, {}
         while not done and (max_frames is None or len(frames) < max_frames):
-            renderer.update_scene(task_env.backend.data, camera=camera if camera is not None else -1)
-            frames.append(renderer.render().copy())
+            frames.append(upright_frame(renderer, task_env.backend.data, camera))
             obs, _, terminated, truncated, info = env.step(act(obs, start))
             start, done, ever = False, terminated or truncated, ever or info["success"]
         successes.append(bool(info["trial_successes"][-1]) if "trial_successes" in info else ever)

@@ -74,3 +74,51 @@ def test_render_without_opengl_says_so_in_one_line(tmp_path):
     proc, frames = render(tmp_path, "tasks/xarm7/reach.yaml", "--max-frames", "2", MUJOCO_GL="glfw")
     assert proc.returncode == 2 and frames == [], proc.stderr
     assert proc.stderr.count("\n") == 1 and "libosmesa6" in proc.stderr and "Traceback" not in proc.stderr
+
+
+ORIENTATION = """
+import json, sys
+import taskforge  # first: it chooses MuJoCo's OpenGL backend (OSMesa without a display)
+import mujoco, numpy as np
+from taskforge.envs import TaskEnv, load_task
+from taskforge.rendering import upright_frame
+out = {}
+for task_file, camera in json.loads(sys.argv[1]):
+    env = TaskEnv(load_task(task_file), task_file, stage="reach")
+    env.reset(seed=0)
+    name = env.backend.task_names[0]
+    model, data = env.backend.model(name), env.backend.data
+    body = model.geom_bodyid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, env.backend.object_geoms(name)[0])]
+    z = model.jnt_qposadr[model.body_jntadr[body]] + 2  # the object's free joint: x, y, z, quaternion
+    renderer = mujoco.Renderer(model, 120, 160)
+
+    def frame(height):  # the object at `height` above where it rests (or out of sight)
+        data.qpos[z] += height
+        mujoco.mj_forward(model, data)
+        image = upright_frame(renderer, data, camera).astype(int)
+        data.qpos[z] -= height
+        return image
+
+    empty = frame(-50.0)
+    rows = [np.nonzero(np.abs(frame(h) - empty).sum(-1) > 30)[0].mean() for h in (0.0, 0.15)]
+    out[f"{task_file}:{camera}"] = rows[1] - rows[0]  # image rows grow downwards
+    renderer.close()  # one OSMesa context at a time
+    env.close()
+print(json.dumps(out))
+"""
+
+
+@needs_osmesa
+def test_frames_are_upright():
+    """Lift the object 15 cm: it must move up in the frame. Meta-World's `corner` cameras point
+    their image "up" at the floor; without the turn every Meta-World render had the table on top."""
+    import json
+
+    views = [("tasks/metaworld/pick_place.yaml", "corner"), ("tasks/metaworld/pick_place.yaml", "corner2"),
+             ("tasks/metaworld/pick_place.yaml", "behindGripper"), ("tasks/xarm7/reach.yaml", "front")]
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY")}
+    proc = subprocess.run([sys.executable, "-c", ORIENTATION, json.dumps(views)], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    for view, moved in json.loads(proc.stdout.strip().splitlines()[-1]).items():
+        assert moved < -3, f"{view}: the lifted object moved {moved:+.1f} rows (down the frame: upside down)"
