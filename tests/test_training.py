@@ -218,10 +218,29 @@ def test_stochastic_eval_is_seeded_and_leaves_the_agents_random_stream_alone(tmp
     assert torch.equal(agent.generator.get_state(), before)
 
 
-def test_plot_writes_a_png(tmp_path):
-    run = train(write_curriculum(tmp_path, total_steps=600), run_dir=tmp_path / "run", progress=False)
+def test_plot_writes_a_png_whose_legend_says_what_each_curve_measures(tmp_path):
+    """The training curve follows the stage being trained (easy, then hard), the evaluation one
+    fixed stage on the test goals: a reader must not take one for the other."""
+    from taskforge.evaluation.plot import run_figure
+
+    cur = write_curriculum(tmp_path, total_steps=1200, evaluation={"every_steps": 600, "episodes": 2, "stage": "hard"})
+    run = train(cur, run_dir=tmp_path / "run", progress=False)
     assert main(["plot", str(run)]) == 0
     assert (run / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    legend = [t.get_text() for t in run_figure(run).axes[1].get_legend().get_texts()]
+    assert legend == ["training episodes, train goals: the stage being trained (easy → hard)",
+                      "evaluation, test goals: stage hard"]
+
+
+def test_plot_of_one_episode_trials_draws_bars_not_a_degenerate_curve(tmp_path):
+    from taskforge.evaluation.plot import adaptation_figure
+
+    run = train(write_curriculum(tmp_path, total_steps=400), run_dir=tmp_path / "run", progress=False)
+    assert main(["eval", str(run), "--episodes", "2", "--out", str(tmp_path / "ppo.json")]) == 0
+    fig = adaptation_figure([tmp_path / "ppo.json"])
+    ax = fig.axes[0]
+    assert len(ax.patches) == 2 and "no adaptation curve" in ax.get_title()  # one bar per stage
+    assert main(["plot", str(tmp_path / "ppo.json")]) == 0 and (tmp_path / "adaptation.png").is_file()
 
 
 @pytest.mark.parametrize(
