@@ -6,6 +6,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -149,6 +150,32 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
         assert hashlib.sha256(f.read()).hexdigest() == before
     train(cur, run_dir=run, steps=step + 200, resume=True, progress=False)
     assert load_checkpoint(run / "checkpoint.pt")["agent"]["global_step"] == step + 200
+
+
+def test_ctrl_c_during_the_first_rollout_after_a_resume_says_what_is_discarded(tmp_path):
+    """The state after the last complete update is what a Ctrl-C keeps; a rollout in progress is
+    named as discarded rather than dropped silently (a resumed run seemed to stand still)."""
+    import yaml
+
+    cur = write_curriculum(tmp_path, total_steps=400_000)
+    agent = {**AGENT, "ppo": {**AGENT["ppo"], "rollout_steps": 20_000}}  # 40,000 steps per update
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
+    run = tmp_path / "run"
+    train(cur, run_dir=run, stop_at=40_000, progress=False)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "taskforge", "train", str(cur), "--run-dir", str(run), "--resume"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    for line in proc.stderr:  # the start-up lines come before the first rollout
+        if "starting 2 envs" in line:
+            break
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert re.search(r"interrupted at step 40,000 \(the [\d,]+ steps collected since were not yet learnt from and are discarded\)", err), err
+    assert load_checkpoint(run / "checkpoint.pt")["agent"]["global_step"] == 40_000
 
 
 def test_kill_at_any_moment_leaves_a_loadable_checkpoint(tmp_path):

@@ -36,8 +36,10 @@ from taskforge.training.warm_start import prepare_warm_start
 class Interrupted(Exception):
     """Training stopped by Ctrl-C or SIGTERM after saving a checkpoint."""
 
-    def __init__(self, step: int, run_dir: Path):
-        super().__init__(f"interrupted at step {step:,}; checkpoint saved in {run_dir} (continue with --resume)")
+    def __init__(self, step: int, run_dir: Path, discarded: int = 0):
+        lost = (f" (the {discarded:,} steps collected since were not yet learnt from and are discarded)"
+                if discarded else "")
+        super().__init__(f"interrupted at step {step:,}{lost}; checkpoint saved in {run_dir} (continue with --resume)")
         self.step = step
 
 
@@ -162,6 +164,8 @@ class _Session:
         self.logger = MetricsLogger(run, resume_step=agent.global_step if start.state else None, fresh=start.state is None)
         self.progress = progress
         self.bar: tqdm | None = None
+        self.collected = 0
+        """Env steps of the rollout in progress (not yet learnt from)."""
         self.last_eval: tuple[int, StageResult] | None = None
         self.last_good = self.snapshot()  # what a Ctrl-C saves: the state after the last complete update
 
@@ -190,8 +194,10 @@ class _Session:
         next_ckpt = (agent.global_step // every_ckpt + 1) * every_ckpt
         next_eval = (agent.global_step // every_eval + 1) * every_eval
         previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+        self.say(f"starting {self.cur.agent.ppo.num_envs} envs of phase {self.scheduler.phase} ({self.cur.phases[self.scheduler.phase].task_file})")
         envs, driver = self.build_envs()
-        self.bar = tqdm(total=self.total, initial=agent.global_step, unit="step", disable=not self.progress,
+        # tqdm's own rate (steps/s since the start, in the bar) and the last update's (postfix)
+        self.bar = tqdm(total=self.total, initial=agent.global_step, unit=" env steps", disable=not self.progress,
                         dynamic_ncols=True, file=sys.stderr)
         try:
             while agent.global_step < until:
@@ -205,6 +211,7 @@ class _Session:
                 self.logger.log(agent.global_step, record)
                 if self.scheduler.phase != driver.phase:
                     envs.close()
+                    self.say(f"starting the envs of phase {self.scheduler.phase} ({self.cur.phases[self.scheduler.phase].task_file})")
                     envs, driver = self.build_envs()
                     agent.reset_envs()
                 self.last_good = self.snapshot()
@@ -212,8 +219,11 @@ class _Session:
                     next_ckpt += every_ckpt
                     save_checkpoint(self.last_good, self.run_dir.checkpoint)
         except KeyboardInterrupt:
+            # what is saved is the state after the last complete update; a rollout in progress
+            # (at most one update's worth of steps) is said to be lost, not silently dropped
             save_checkpoint(self.last_good, self.run_dir.checkpoint)
-            raise Interrupted(self.last_good["agent"]["global_step"], self.run_dir.path) from None
+            step = self.last_good["agent"]["global_step"]
+            raise Interrupted(step, self.run_dir.path, discarded=self.collected) from None
         finally:
             self.bar.close()
             self.bar = None
@@ -233,18 +243,27 @@ class _Session:
         agent = self.agent
         agent.set_progress(agent.global_step / self.total)
         start_step, start_time = agent.global_step, time.perf_counter()
-        agent.collect(envs, driver.on_step)
+        bar, per_step = self.bar, envs.num_envs
+        assert bar is not None
+        self.collected = 0
+
+        def on_step(*args) -> None:  # the bar moves while collecting, not once per update
+            driver.on_step(*args)
+            self.collected += per_step
+            bar.update(per_step)
+
+        agent.collect(envs, on_step)
         losses = agent.update()
+        self.collected = 0
         sps = (agent.global_step - start_step) / (time.perf_counter() - start_time)
         episodes, events = driver.drain()
         for event in events:
             self.logger.event(asdict(event))
             why = ", step budget spent" if event.reason == "budget" else ""
             self.say(f"{event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f}{why})")
-        assert self.bar is not None
-        self.bar.update(agent.global_step - start_step)
         window = self.scheduler.success_rates().get(f"{self.scheduler.phase}/{self.scheduler.stage}", 0.0)
-        self.bar.set_postfix_str(f"{self.scheduler.stage} success {window:.2f} | {sps:,.0f} steps/s")
+        bar.set_postfix_str(f"stage {self.scheduler.stage}, success {window:.2f} over the window | "
+                            f"last update {sps:,.0f} steps/s (collect + learn)")
         return {"phase": self.scheduler.phase, "stage": self.scheduler.stage, "steps_per_s": sps,
                 **_episode_metrics(episodes), **{f"window_success/{k}": v for k, v in self.scheduler.success_rates().items()},
                 **losses}

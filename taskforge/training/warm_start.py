@@ -81,6 +81,7 @@ def prepare_warm_start(
         return WarmStart(demos, generated, None, labelled)
 
     # 2. behaviour cloning (actor) and value regression (critic) on the demos
+    _say(progress, f"warm start: behaviour cloning on {demos.num_steps:,} steps of {demos.num_episodes} demos ({ws.bc_epochs} epochs)")
     rewards = scaled_rewards(agent, demos.rewards, demos.episode_starts, demos.terminated)
     targets = returns_to_go(rewards, demos.episode_starts, demos.truncated, agent.spec.ppo.gamma)
     metrics = pretrain(
@@ -102,6 +103,8 @@ def prepare_warm_start(
 
     # 4. the hand-over to PPO
     ppo = agent.spec.ppo
+    if ws.fine_tune.critic_warmup_steps:
+        _say(progress, f"warm start: the first {ws.fine_tune.critic_warmup_steps:,} PPO steps train the critic only")
     agent.warm_up_critic(math.ceil(ws.fine_tune.critic_warmup_steps / (ppo.num_envs * ppo.rollout_steps)))
     if ws.fine_tune.freeze_observation_statistics:
         agent.freeze_observation_statistics()
@@ -132,6 +135,7 @@ def _demonstrations(
         return demo_io.load(saved), True
     phase = cur.phases[ws.phase]
     stage = ws.stage or phase.stages[-1]
+    _say(progress, f"warm start: recording {ws.generate_episodes} scripted episodes of {phase.task.name}:{stage}")
     demos = demo_io.generate(phase.task_file, stage, ws.generate_episodes, seed=seed, split="train", progress=progress)
     if demos.num_steps == 0:
         raise SpecError.single(
@@ -139,6 +143,12 @@ def _demonstrations(
             f"no scripted episode of stage '{stage}' succeeded out of {ws.generate_episodes}; no demos to learn from",
         )
     return demos, True
+
+
+def _say(progress: bool, line: str) -> None:
+    """A start-up phase on stderr, so minutes of warm start are not minutes of silence."""
+    if progress:
+        print(line, file=sys.stderr, flush=True)
 
 
 def _set_exploration(agent: PPOAgent, ws: WarmStartSpec, observations: np.ndarray, actions: np.ndarray) -> None:
