@@ -176,6 +176,35 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_inspect(args: argparse.Namespace) -> int:
+    import textwrap
+
+    from taskforge.envs import TaskEnv, load_task
+    from taskforge.inspection import model_names, scripted_trace
+
+    task = load_task(args.task)
+    stage = args.stage or task.stages[-1].name
+    if stage not in task.stage_names:
+        raise SpecError.single(args.task, "stage", f"no stage '{stage}'; {expected_one_of(stage, task.stage_names)}")
+    if args.every < 1:
+        raise SpecError.single("--every", "", f"expected a positive number of steps (got {args.every})")
+    env = TaskEnv(task, args.task, stage=stage, split=args.split, task_name=args.sub_task)
+    names = model_names(env, args.sub_task)
+    print(f"{args.task}: {task.backend.describe()}" + ("" if names else " (no MuJoCo model: no element names)"))
+    for kind, found in names.items():
+        print(textwrap.fill(", ".join(found) or "-", width=110, initial_indent=f"  {kind} ({len(found)}): ",
+                            subsequent_indent="      "))
+    trace = scripted_trace(env, stage, seed=args.seed, goal_index=args.goal)
+    print(f"\nstage {stage}, {args.split} goal {args.goal}, scripted policy {trace.policy}: "
+          f"{'succeeds at step ' + str(next(int(r[0]) for r in trace.rows if r[-1])) if any(r[-1] for r in trace.rows) else 'never succeeds'}")
+    print(trace.table(args.every))
+    if args.csv:
+        trace.write_csv(Path(args.csv))
+        print(f"wrote {args.csv}: every step of the episode")
+    env.close()
+    return 0
+
+
 def cmd_schema(args: argparse.Namespace) -> int:
     import json
 
@@ -266,6 +295,17 @@ def build_parser() -> argparse.ArgumentParser:
                         "(success per episode of the trial, e.g. RL² next to PPO)")
     p.add_argument("--out", help="default: RUN_DIR/curves.png, or adaptation.png beside the first report")
     p.set_defaults(func=cmd_plot)
+
+    p = sub.add_parser("inspect", help="a task's model names by kind, and a scripted episode's features and rewards per step")
+    p.add_argument("task", metavar="TASK.yaml")
+    p.add_argument("--stage", help="default: the task's last stage")
+    p.add_argument("--split", choices=["train", "test"], default="train")
+    p.add_argument("--goal", type=int, default=0, help="goal index of the split (default 0)")
+    p.add_argument("--sub-task", help="for a task set (MT10): which sub-task (default the first)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--every", type=int, default=10, help="print every N-th step (default 10); --csv has them all")
+    p.add_argument("--csv", help="write every step as CSV here")
+    p.set_defaults(func=cmd_inspect)
 
     p = sub.add_parser("schema", help="JSON Schema of task, agent or curriculum files, for editors")
     p.add_argument("kind", choices=["task", "agent", "curriculum"])

@@ -267,7 +267,8 @@ def _resolve(
             known = known if len(known) <= 200 else known[:200].rsplit(", ", 1)[0] + ", ..."
             raise SpecError.single(
                 file, f"{path}.names[{j}]",
-                f"'{pattern}' matches no {kind.name[6:].lower()} of the model; names include {known}",
+                f"'{pattern}' matches no {kind.name[6:].lower()} of the model; names include {known} "
+                f"(every name: taskforge inspect {file})",
             )
         chosen += [i for i in hits if i not in chosen]
     if target.object_default and not chosen:
