@@ -45,6 +45,12 @@ CATALOGUE = [
     ("unknown-term", _set(["stages", 1, "rewards", 0, "term"], "tcp_to_objet"), "stages[1].rewards[0].term", "did you mean 'tcp_to_object'"),
     ("unknown-stage-key", _set(["stages", 0, "max_episode_step"], 10), "stages[0].max_episode_step", "did you mean 'max_episode_steps'"),
     ("unknown-top-key", _set(["stagez"], []), "stagez", "did you mean 'stages'"),
+    # one mistake, one line: a block in another shape is not a missing field plus two unknown ones
+    ("misshapen-success", _set(["stages", 0, "success"], {"feature": "tcp_to_object_distance", "below": 0.03}),
+     "stages[0].success", "expected the field 'all', got 'below', 'feature'"),  # the file's key order (sorted by the dump)
+    # names are ranked by their parts: the object (here a handle) to the goal, not the tool
+    ("feature-by-parts", _set(["stages", 3, "success", "all", 0, "feature"], "handle_to_goal_distance"),
+     "stages[3].success.all[0].feature", "did you mean 'object_to_goal_distance'"),
     ("negative-std", _set(["randomization", "observation_noise", "per_step", "std"], -1), "randomization.observation_noise.per_step.std", "greater than or equal to 0"),
     ("min-above-max", _set(["randomization", "physics", 0, "low"], 2.0), "randomization.physics[0]", "'low' (2.0) must be <= 'high' (1.5)"),
     ("loguniform-nonpositive", _set(["randomization", "physics", 2, "low"], 0.0), "randomization.physics[2]", "loguniform distribution needs 'low' > 0"),

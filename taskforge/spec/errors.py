@@ -8,6 +8,7 @@ taskforge and is allowed to show its traceback.
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,9 +55,32 @@ def format_path(loc: Iterable[str | int]) -> str:
 
 
 def did_you_mean(word: str, choices: Iterable[str]) -> str:
-    """A ' (did you mean X?)' hint, or '' when nothing is close."""
-    close = difflib.get_close_matches(word, list(choices), n=1, cutoff=0.6)
-    return f" (did you mean '{close[0]}'?)" if close else ""
+    """A ' (did you mean X?)' hint, or '' when nothing is close.
+
+    Names here are built from parts (`object_to_goal_distance`), so candidates are ranked by the
+    share of parts they have in common first, then by how alike the parts that differ are, then
+    by the whole spelling: `handle_to_goal_distance` gets `object_to_goal_distance` (the parts
+    `to_goal_distance` tie it with `tcp_to_goal_distance`; "handle" is more like "object" than
+    "tcp"), where spelling alone picked the other."""
+    choices = list(choices)
+    if not choices:
+        return ""
+    mine = _parts(word)
+
+    def score(choice: str) -> tuple[float, float, float]:
+        theirs = _parts(choice)
+        shared = len(set(mine) & set(theirs)) / max(len(mine), len(theirs))
+        differing = difflib.SequenceMatcher(None, "_".join(p for p in mine if p not in theirs),
+                                            "_".join(p for p in theirs if p not in mine)).ratio()
+        return shared, differing, difflib.SequenceMatcher(None, word, choice).ratio()
+
+    best = max(choices, key=score)
+    shared, _, spelling = score(best)
+    return f" (did you mean '{best}'?)" if shared >= 0.5 or spelling >= 0.6 else ""
+
+
+def _parts(name: str) -> list[str]:
+    return [p for p in re.split(r"[_\-.\s]+", name.lower()) if p]
 
 
 def expected_one_of(word: str, choices: Iterable[str]) -> str:
@@ -79,7 +103,8 @@ def issues_from_validation(
     """
     tags = set(union_tags)
     issues = []
-    for err in exc.errors(include_url=False):
+    errors = _merge_misshapen(exc.errors(include_url=False))
+    for err in errors:
         # pydantic puts the chosen member of a tagged union into `loc`; users never wrote it.
         raw = tuple(err["loc"])
         loc = [p for p in raw if not (isinstance(p, str) and p in tags)]
@@ -88,7 +113,13 @@ def issues_from_validation(
         if kind in ("union_tag_invalid", "union_tag_not_found"):
             loc.append(str(ctx.get("discriminator", "type")).strip("'"))
         path = format_path([*prefix, *loc])
-        if kind == "extra_forbidden":
+        if kind == "misshapen":
+            msg = (f"expected the field{'s' * (len(ctx['missing']) > 1)} {', '.join(map(repr, ctx['missing']))}, "
+                   f"got {', '.join(map(repr, ctx['unknown']))}")
+            fields = sorted(allowed_keys(raw)) if allowed_keys else []
+            if set(fields) != set(ctx["missing"]):
+                msg += f" (fields here: {', '.join(fields)})"
+        elif kind == "extra_forbidden":
             key = str(loc[-1]) if loc else "?"
             names = allowed_keys(raw[:-1]) if allowed_keys else []
             msg = f"unknown field '{key}'; expected one of {', '.join(sorted(names))}{did_you_mean(key, names)}"
@@ -109,6 +140,30 @@ def issues_from_validation(
                 msg += f" (got {_short(err['input'])})"
         issues.append(SpecIssue(str(file), path, msg))
     return issues
+
+
+def _merge_misshapen(errors: list[dict]) -> list[dict]:
+    """A block written in another shape (`success: {feature: ..., below: ...}` for
+    `success: {all: [...]}`) is one mistake: pydantic reports each missing field and each unknown
+    key apart; they become one `misshapen` error at the block."""
+    by_parent: dict[tuple, dict[str, list[str]]] = {}
+    for err in errors:
+        if err["type"] in ("missing", "extra_forbidden") and err["loc"]:
+            kinds = by_parent.setdefault(tuple(err["loc"][:-1]), {"missing": [], "extra_forbidden": []})
+            kinds[err["type"]].append(str(err["loc"][-1]))
+    merged = {parent for parent, kinds in by_parent.items() if kinds["missing"] and kinds["extra_forbidden"]}
+    out, done = [], set()
+    for err in errors:
+        parent = tuple(err["loc"][:-1]) if err["loc"] else None
+        if parent in merged and err["type"] in ("missing", "extra_forbidden"):
+            if parent not in done:
+                done.add(parent)
+                kinds = by_parent[parent]
+                out.append({"type": "misshapen", "loc": parent, "msg": "",
+                            "ctx": {"missing": kinds["missing"], "unknown": kinds["extra_forbidden"]}})
+            continue
+        out.append(err)
+    return out
 
 
 def _short(value: object, limit: int = 60) -> str:
