@@ -49,7 +49,14 @@ def cmd_validate(args: argparse.Namespace) -> int:
             else:
                 curriculum = load_curriculum(path)
                 # One policy for every phase: their observation/action shapes must agree.
-                probe_phases([(p.task, p.task_file) for p in curriculum.phases], curriculum.agent.asymmetric_critic, path)
+                shapes = probe_phases([(p.task, p.task_file) for p in curriculum.phases], curriculum.agent.asymmetric_critic, path)
+                ws = curriculum.spec.warm_start
+                if ws is not None and ws.demos is not None:  # the demos file, as `train` will read it
+                    from taskforge.agents import agent_observation_space
+                    from taskforge.training.warm_start import load_demos_file
+
+                    space = agent_observation_space(curriculum.agent, shapes.observation_space, shapes.action_space)
+                    load_demos_file(curriculum, space.shape[0])
                 lines = curriculum_summary(curriculum)
                 for warning in curriculum.warnings:
                     print(f"warning: {warning}", file=sys.stderr)
@@ -69,11 +76,19 @@ def cmd_tasks(args: argparse.Namespace) -> int:
     root = Path(args.dir)
     if not root.is_dir():
         raise SpecError.single(root, "", "no such directory; expected the folder of task files (e.g. tasks/)")
-    files = sorted(p for p in root.rglob("*.yaml") if "stages" in read_yaml_with_base(p))
-    for path in files:
-        task = load_task_spec(path)
-        source = task.backend.describe()
-        print(f"{path}  [{task.backend.type}: {source}]  {' -> '.join(task.stage_names)}")
+    broken: list[SpecIssue] = []
+    for path in sorted(root.rglob("*.yaml")):
+        try:  # one broken file is one line; the others are still listed
+            if "stages" not in read_yaml_with_base(path):
+                continue
+            task = load_task_spec(path)
+        except SpecError as exc:
+            broken += exc.issues[:1]
+            print(f"{path}  [broken: {len(exc.issues)} mistake{'s' * (len(exc.issues) > 1)}, see below]")
+            continue
+        print(f"{path}  [{task.backend.type}: {task.backend.describe()}]  {' -> '.join(task.stage_names)}")
+    if broken:
+        raise SpecError(broken)  # the first mistake of each broken file (`validate FILE` lists all)
     return 0
 
 

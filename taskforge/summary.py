@@ -15,6 +15,22 @@ def condition_text(c: ConditionSpec) -> str:
     return " and ".join(parts)
 
 
+def _interval(name: str, bounds: tuple[float, float]) -> str:
+    return f"{name} {bounds[0]:g}..{bounds[1]:g}"
+
+
+def _regions(backend) -> list[str]:
+    """Where objects start and goals lie, for backends whose task file sets them (xArm7);
+    Meta-World's come from the env itself."""
+    lines = []
+    for label, field, axes in (("object starts", "object_region", "xy"), ("goals", "goal_region", "xyz")):
+        region = getattr(backend, field, None)
+        if region is not None:
+            where = ", ".join(_interval(a, getattr(region, a)) for a in axes)
+            lines.append(f"  {label}: {where} m" + (" (z above the table top)" if "z" in axes else ""))
+    return lines
+
+
 def task_summary(task: TaskSpec) -> list[str]:
     b = task.backend
     source = b.describe()
@@ -22,6 +38,7 @@ def task_summary(task: TaskSpec) -> list[str]:
     lines = [
         f"task {task.name}: backend {b.type}, {source}, episodes of {task.max_episode_steps} steps",
         f"  {goals} train {task.goals.train.count}, test (held out) {task.goals.test.count}",
+        *_regions(b),
         f"  stages ({len(task.stages)}):",
     ]
     for i, stage in enumerate(task.stages):

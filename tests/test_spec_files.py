@@ -69,6 +69,28 @@ def test_pick_place_summary_names_every_stage_term_and_range(capsys, monkeypatch
     assert "object start: random per task instance" in capsys.readouterr().out
 
 
+def test_xarm7_summary_shows_where_objects_and_goals_lie(capsys, monkeypatch):
+    monkeypatch.chdir(ROOT)
+    assert main(["validate", "tasks/xarm7/pick_place.yaml"]) == 0
+    out = capsys.readouterr().out
+    assert "object starts: x 0.3..0.6, y -0.25..0.25 m" in out
+    assert "goals: x 0.3..0.6, y -0.25..0.25, z 0.05..0.3 m (z above the table top)" in out
+
+
+def test_tasks_lists_the_good_files_and_one_line_per_broken_one(tmp_path, capsys):
+    import shutil
+
+    for name in ("reach.yaml", "push.yaml"):
+        shutil.copy(ROOT / "tasks/metaworld" / name, tmp_path / name)
+    (tmp_path / "a_broken.yaml").write_text((ROOT / "tasks/metaworld/reach.yaml").read_text().replace("max_episode_steps", "max_episode_step", 1))
+    assert main(["tasks", "--dir", str(tmp_path)]) == 2
+    captured = capsys.readouterr()
+    assert f"{tmp_path / 'reach.yaml'}  [metaworld" in captured.out and f"{tmp_path / 'push.yaml'}  [metaworld" in captured.out
+    assert f"{tmp_path / 'a_broken.yaml'}  [broken" in captured.out
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "a_broken.yaml: max_episode_step: unknown field" in err[0]
+
+
 def test_tasks_lists_shipped_tasks_with_stages(capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
     assert main(["tasks"]) == 0

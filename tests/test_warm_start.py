@@ -225,6 +225,23 @@ def test_training_with_demos_of_another_stage_is_refused(tmp_path, capsys):
     assert not (tmp_path / "run").exists()  # nothing written before the inputs are known to be good
 
 
+@pytest.mark.parametrize("stage,obs_size,fragment", [
+    ("hard", 3, "warm_start.stage: 'hard', but"),
+    ("easy", 5, "warm_start.demos: demo observations have 5 floats; the policy reads 3"),
+])
+def test_validate_checks_the_demos_file_as_train_does(stage, obs_size, fragment, tmp_path, capsys):
+    """`validate` said `ok` to a curriculum whose demos `train` then refused."""
+    demos = pendulum_demos(stage="easy")
+    demos.observations = np.zeros((demos.num_steps, obs_size), dtype=np.float32)
+    save(demos, tmp_path / "d.npz")
+    cur = write_files(tmp_path, {"demos": "d.npz", "stage": stage})
+    assert main(["validate", str(cur)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and fragment in err
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run"), "--no-progress"]) == 2
+    assert fragment in capsys.readouterr().err
+
+
 def test_training_generates_metaworld_demos_and_keeps_them_for_resume(tmp_path):
     agent = {"name": "tiny", "policy": {"hidden_sizes": [32, 32]},
              "ppo": {"num_envs": 1, "rollout_steps": 50, "num_minibatches": 1, "update_epochs": 1},

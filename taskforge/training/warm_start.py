@@ -68,10 +68,7 @@ def prepare_warm_start(
     if ws is None:
         return None
     demos, generated = _demonstrations(cur, ws, run, seed, resumed, progress)
-    size = agent.obs_normalizer.rms.mean.shape[0]
-    if demos.observations.shape[1] != size:
-        where = "warm_start.demos" if ws.demos else "warm_start.phase"
-        raise SpecError.single(cur.file, where, f"demo observations have {demos.observations.shape[1]} floats; the policy reads {size}")
+    _check_size(cur, demos, agent.obs_normalizer.rms.mean.shape[0])
 
     if resumed:  # the checkpoint holds the pretrained networks; only the BC term is not saved in it
         labelled = _load_labelled(run.dagger)
@@ -117,20 +114,37 @@ def prepare_warm_start(
     return WarmStart(demos, generated, metrics, labelled)
 
 
+def load_demos_file(cur: ResolvedCurriculum, obs_size: int | None = None) -> demo_io.Demos:
+    """The curriculum's `warm_start.demos` file, checked as training will use it: readable, of
+    the warm start's stage and (given `obs_size`, the policy's input) of the right observation
+    size. `validate` calls this too, so a file `train` would refuse is not reported `ok`."""
+    ws = cur.spec.warm_start
+    assert ws is not None and ws.demos is not None and cur.demos_file is not None
+    try:
+        demos = demo_io.load(cur.demos_file)
+    except SpecError as exc:
+        raise SpecError.single(cur.file, "warm_start.demos", "; ".join(str(i) for i in exc.issues)) from None
+    recorded = demos.metadata.get("stage")
+    if ws.stage is not None and recorded != ws.stage:
+        raise SpecError.single(cur.file, "warm_start.stage", f"'{ws.stage}', but {cur.demos_file} holds demos of stage '{recorded}'")
+    if obs_size is not None:
+        _check_size(cur, demos, obs_size)
+    return demos
+
+
+def _check_size(cur: ResolvedCurriculum, demos: demo_io.Demos, size: int) -> None:
+    if demos.observations.shape[1] != size:
+        where = "warm_start.demos" if cur.spec.warm_start and cur.spec.warm_start.demos else "warm_start.phase"
+        raise SpecError.single(cur.file, where, f"demo observations have {demos.observations.shape[1]} floats; the policy reads {size}")
+
+
 def _demonstrations(
     cur: ResolvedCurriculum, ws: WarmStartSpec, run: RunDir, seed: int, resumed: bool, progress: bool
 ) -> tuple[demo_io.Demos, bool]:
     """The demos file, the demos a resumed run saved, or newly recorded scripted episodes."""
     saved = run.demos
     if ws.demos is not None:
-        try:
-            demos = demo_io.load(cur.demos_file)
-        except SpecError as exc:
-            raise SpecError.single(cur.file, "warm_start.demos", "; ".join(str(i) for i in exc.issues)) from None
-        recorded = demos.metadata.get("stage")
-        if ws.stage is not None and recorded != ws.stage:
-            raise SpecError.single(cur.file, "warm_start.stage", f"'{ws.stage}', but {cur.demos_file} holds demos of stage '{recorded}'")
-        return demos, False
+        return load_demos_file(cur), False
     if resumed and saved.is_file():
         return demo_io.load(saved), True
     phase = cur.phases[ws.phase]
