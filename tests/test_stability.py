@@ -92,3 +92,29 @@ def test_a_non_finite_loss_is_skipped_not_applied():
     assert all(torch.isfinite(v).all() for v in after.values())
     assert any(not torch.equal(before[k], after[k]) for k in before)  # the clean minibatches were applied
     envs.close()
+
+
+def test_mujoco_warnings_go_to_logging_not_to_a_file_in_the_working_directory(tmp_path):
+    """A blown-up simulation (velocities of 1e20): MuJoCo's warning reaches taskforge's logger
+    once, the env ends the episode, and no MUJOCO_LOG.TXT appears where the user ran from."""
+    import subprocess
+    import sys
+
+    code = (
+        "import numpy as np\n"
+        "from taskforge.envs import TaskEnv, load_task\n"
+        f"env = TaskEnv(load_task({str(XARM7)!r}), {str(XARM7)!r}, stage='reach')\n"
+        "for seed in (0, 1):\n"
+        "    env.reset(seed=seed)\n"
+        "    env.backend.data.qvel[:] = 1e20\n"
+        "    info = env.step(np.zeros(4))[4]\n"
+        "    assert info['unstable'], info\n"
+    )
+    import os
+
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}  # this checkout's taskforge, run from elsewhere
+    run = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.startswith("MuJoCo: ")]
+    assert len(lines) == 1 and "Nan, Inf or huge value" in lines[0]  # once per distinct message
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()

@@ -1,9 +1,15 @@
 """What every MuJoCo backend computes the same way: the stage's goal override, the grasp test,
 the distance features, and whether the simulation has blown up. One copy, so the backends cannot
-drift apart (they had: only one grasp test skipped contacts without a constraint row)."""
+drift apart (they had: only one grasp test skipped contacts without a constraint row).
+
+Importing it also routes MuJoCo's warnings ("Nan, Inf or huge value in QACC…") to Python's
+logging (logger `taskforge.mujoco`, once per distinct message) instead of MuJoCo's default,
+which prints them and appends them to a `MUJOCO_LOG.TXT` in whatever directory the user runs
+from. The env ends such an episode itself (`diverged`) and the trainer counts it."""
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Collection
 
@@ -11,6 +17,19 @@ import mujoco
 import numpy as np
 
 from taskforge.backends.base import GoalOverride
+
+LOGGER = logging.getLogger("taskforge.mujoco")
+_warned: set[str] = set()
+
+
+def _log_warning(message: str) -> None:
+    text = message.split(" Time = ")[0].strip()  # the time stamp makes every message new
+    if text not in _warned:
+        _warned.add(text)
+        LOGGER.warning("MuJoCo: %s (the episode is ended as truncated and counted in unstable_episodes)", text)
+
+
+mujoco.set_mju_user_warning(_log_warning)
 
 _DIVERGENCE_WARNINGS = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)]
 
