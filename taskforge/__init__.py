@@ -6,15 +6,33 @@ Public API (stable):
     taskforge.SpecError                                        -> every user mistake
 """
 
-import ctypes.util
 import os
+
+_LIBRARY_DIRS = ("/usr/lib", "/usr/lib64", "/usr/local/lib", "/lib", "/lib64", "/usr/lib/x86_64-linux-gnu",
+                 "/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/lib/aarch64-linux-gnu")
+
+
+def _has_osmesa() -> bool:
+    """libOSMesa in LD_LIBRARY_PATH or a system library directory. A directory scan rather than
+    `ctypes.util.find_library`, which costs tens of milliseconds (ctypes, an `ldconfig` call) at
+    every `import taskforge`, the window in which a Ctrl-C would still print a traceback."""
+    dirs = [d for d in os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep) if d] + list(_LIBRARY_DIRS)
+    for directory in dirs:
+        try:
+            with os.scandir(directory) as entries:
+                if any(e.name.startswith("libOSMesa.so") for e in entries):
+                    return True
+        except OSError:
+            continue
+    return False
+
 
 # MuJoCo chooses its OpenGL backend once, when first imported. Without a display, its default
 # (GLFW) cannot render at all; software OSMesa (Debian's libosmesa6) works everywhere it is
 # installed. Only then is it chosen: with MUJOCO_GL=osmesa and no libOSMesa, `import mujoco`
 # itself fails, and training needs no OpenGL at all. A user who set MUJOCO_GL (e.g. egl on a
 # GPU machine) keeps their choice.
-if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and ctypes.util.find_library("OSMesa"):
+if "MUJOCO_GL" not in os.environ and not os.environ.get("DISPLAY") and _has_osmesa():
     os.environ["MUJOCO_GL"] = "osmesa"
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 

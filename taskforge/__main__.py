@@ -4,6 +4,7 @@ A thin door in front of `taskforge.cli`: nothing heavy is imported before the `t
 at any moment, the first half-second of imports included, ends quietly with exit code 130.
 """
 
+import os
 import sys
 
 
@@ -14,7 +15,11 @@ def run() -> None:
         code = main()
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        code = 130
+        # An interrupt that landed inside an import can leave the interpreter flagged as killed by
+        # SIGINT, so a plain exit would end the process by the signal (-2), not with status 130.
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)
     sys.exit(code)
 
 
