@@ -79,7 +79,7 @@ def scripted_trace(env: TaskEnv, stage: str, seed: int = 0, goal_index: int = 0)
     columns = ["step", *features, *(f"reward/{k}" for k in weights), "reward", "success"]
 
     def row(step: int, reward: float, info: dict) -> list:
-        f = env.features()
+        f = {**env.features(), "stage_success": float(bool(info["success"]))}  # the env adds it, not the backend
         terms = info.get("reward_terms", {})
         return [step, *(float(f[name]) for name in features), *(weights[k] * float(terms.get(k, 0.0)) for k in weights),
                 float(reward), int(bool(info["success"]))]

@@ -27,6 +27,14 @@ def test_inspect_lists_every_name_and_traces_the_scripted_episode(tmp_path, caps
     assert abs(total - float(rows[5]["reward"])) < 1e-6  # the terms add up to the reward
 
 
+def test_inspect_traces_every_shipped_stage(capsys):
+    """Every stage's terms and conditions have a column, `stage_success` (added by the env, not
+    the backend) included."""
+    for stage in ("reach", "push", "pick", "place"):
+        assert main(["inspect", str(PICK_PLACE), "--stage", stage, "--every", "100"]) == 0
+    assert "reward/stage_success" in capsys.readouterr().out
+
+
 def test_a_bad_physics_name_points_to_inspect(tmp_path, capsys):
     import yaml
 
