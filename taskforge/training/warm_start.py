@@ -83,7 +83,7 @@ def prepare_warm_start(
     targets = returns_to_go(rewards, demos.episode_starts, demos.truncated, agent.spec.ppo.gamma)
     metrics = pretrain(
         agent, demos.observations, demos.actions, targets, epochs=ws.bc_epochs, batch_size=ws.bc_batch_size,
-        learning_rate=ws.bc_learning_rate, privileged=demos.privileged,
+        learning_rate=ws.bc_learning_rate, privileged=demos.privileged, progress=progress,
     )
     metrics["bc_demo_episodes"] = float(demos.num_episodes)
     _set_exploration(agent, ws, demos.observations, demos.actions)
@@ -190,7 +190,7 @@ def _run_dagger(
     def refit(observations: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         metrics = pretrain(
             agent, observations, actions, epochs=ws.dagger.epochs, batch_size=ws.bc_batch_size,
-            learning_rate=ws.bc_learning_rate, update_normalizer=False,
+            learning_rate=ws.bc_learning_rate, update_normalizer=False, progress=progress,
         )
         _set_exploration(agent, ws, observations, actions)  # the next round explores as PPO will
         return metrics
