@@ -214,6 +214,10 @@ def test_training_pretrains_once_and_the_regularizer_survives_resume(tmp_path):
     updates = [m for m in metrics if "bc_weight" in m]
     assert [m["step"] for m in updates] == [300, 500, 700]
     assert [m["bc_weight"] for m in updates] == [0.5, 0.25, 0.125]  # decay continues across the resume
+    # promotions are on the run's clock (demo steps included), where the plot draws them
+    promotions = [e for e in read_jsonl(run / "events.jsonl") if e["kind"] == "promote"]
+    assert promotions and all(e["step"] in {m["step"] for m in metrics} for e in promotions)
+    assert all(e["step"] == e["curriculum_step"] + 100 for e in promotions)
 
 
 def test_training_with_demos_of_another_stage_is_refused(tmp_path, capsys):

@@ -258,7 +258,9 @@ class _Session:
         sps = (agent.global_step - start_step) / (time.perf_counter() - start_time)
         episodes, events = driver.drain()
         for event in events:
-            self.logger.event(asdict(event))
+            # on the run's clock, like the metrics: the scheduler counts only PPO's steps, so for a
+            # warm-started run its own step would sit the expert's steps earlier on every plot
+            self.logger.event({**asdict(event), "step": agent.global_step, "curriculum_step": event.step})
             why = ", step budget spent" if event.reason == "budget" else ""
             self.say(f"{event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f}{why})")
         window = self.scheduler.success_rates().get(f"{self.scheduler.phase}/{self.scheduler.stage}", 0.0)
