@@ -140,7 +140,8 @@ def _start(cur: ResolvedCurriculum, run: RunDir, seed: int | None, steps: int | 
         print(f"note: no {run.checkpoint.name} in {run} yet (stopped before its first checkpoint, or never started): "
               "starting the run afresh", file=sys.stderr)
     elif run.checkpoint.exists() or run.final.exists():
-        raise SpecError.single(run.path, "", f"already holds a run ({run.checkpoint.name}); pass --resume to continue it or choose another --run-dir")
+        held = run.checkpoint if run.checkpoint.exists() else run.final
+        raise SpecError.single(run.path, "", f"already holds a run ({held.name}); pass --resume to continue it or choose another --run-dir")
     seed = cur.spec.seed if seed is None else seed
     total = steps or (state["config"]["total_steps"] if state else cur.spec.total_steps)
     return _Start(seed, total, run_config(cur, seed, total), state)
