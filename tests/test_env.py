@@ -247,3 +247,38 @@ def test_ml1_goal_cache_on_disk_round_trips_and_survives_corruption(tmp_path, mo
     ml1_goals.cache_clear()
     assert [t.data for t in ml1_goals("reach-v3", 7)[0]] == [t.data for t in first[0]]
     ml1_goals.cache_clear()
+
+
+@pytest.mark.parametrize("task_file", [PICK_PLACE, TASKS / "xarm7/pick_place.yaml"])
+def test_relative_positions_append_object_minus_tool_and_goal_minus_object(task_file):
+    doc = yaml.safe_load(task_file.read_text())
+    doc["randomization"] = {}  # no noise: the appended floats are exact
+    plain = env_from(doc, stage="place")
+    doc["observation"] = {"relative_positions": True}
+    env = env_from(doc, stage="place")
+    assert env.observation_space.shape[0] == plain.observation_space.shape[0] + 6
+    obs, _ = env.reset(seed=0)
+    base, _ = plain.reset(seed=0)
+    np.testing.assert_allclose(obs[:-6], base, atol=1e-6)  # the backend's observation is unchanged
+    for _ in range(5):
+        obs = env.step(env.action_space.sample())[0]
+    f = env.features()
+    np.testing.assert_allclose(obs[-6:-3], f["object_pos"] - f["tcp_pos"], atol=1e-5)
+    np.testing.assert_allclose(obs[-3:], f["goal_pos"] - f["object_pos"], atol=1e-5)
+
+
+def test_relative_positions_hide_the_goal_with_it(pick_place_doc):
+    doc = copy.deepcopy(pick_place_doc)
+    doc["goals"]["observable"] = False
+    doc["observation"] = {"relative_positions": True}
+    env = env_from(doc, stage="place")
+    obs, _ = env.reset(seed=0)
+    assert np.all(obs[-3:] == 0.0) and np.any(obs[-6:-3] != 0.0)
+
+
+def test_relative_positions_need_the_position_features(tmp_path):
+    doc = {"name": "pendulum", "backend": {"type": "gymnasium", "env": "Pendulum-v1"},
+           "stages": [{"name": "s", "rewards": [{"term": "native"}], "success": {"all": [{"feature": "native_return", "above": 0}]}}],
+           "observation": {"relative_positions": True}}
+    with pytest.raises(SpecError, match="observation.relative_positions: the gymnasium backend does not provide goal_pos, object_pos, tcp_pos"):
+        env_from(doc)

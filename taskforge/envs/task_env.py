@@ -24,6 +24,9 @@ from taskforge.spec import SpecError, TaskSpec, expected_one_of
 from taskforge.terms import FEATURES, CompiledStage, Features
 
 SPLITS: tuple[Split, ...] = ("train", "test")
+RELATIVE_FEATURES = frozenset({"tcp_pos", "object_pos", "goal_pos"})
+RELATIVE_SIZE = 6
+"""Floats `observation.relative_positions` appends: object - tool, goal - object."""
 
 
 class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
@@ -83,7 +86,12 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
 
         rand = task.randomization
         n_act = self.backend.action_space.shape[0]
-        self._obs_noise = AdditiveNoise(rand.observation_noise, self.backend.obs_size)
+        self._relative = task.observation.relative_positions
+        if self._relative and not RELATIVE_FEATURES <= self.backend.provides:
+            missing = ", ".join(sorted(RELATIVE_FEATURES - self.backend.provides))
+            raise SpecError.single(file, "observation.relative_positions", f"the {task.backend.type} backend does not provide {missing}")
+        obs_size = self.backend.obs_size + (RELATIVE_SIZE if self._relative else 0)
+        self._obs_noise = AdditiveNoise(rand.observation_noise, obs_size)
         self._act_noise = AdditiveNoise(rand.action_noise, n_act)
         self._latency = ActionLatency(rand.action_latency, n_act)
         self._backlash = ActionBacklash(rand.action_backlash, n_act)
@@ -92,7 +100,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._object_seed = 0
 
         self.action_space = Box(-1.0, 1.0, (n_act,), np.float32)
-        self.observation_space = Box(-np.inf, np.inf, (self.backend.obs_size,), np.float32)
+        self.observation_space = Box(-np.inf, np.inf, (obs_size,), np.float32)
         self._seed = seed
         self.next_episode: dict[str, Any] | None = None
         self._episode: dict[str, Any] = {}
@@ -166,7 +174,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         features = self.backend.features()
         features["action"] = np.zeros(self.action_space.shape[0])
         info = self._info(features, stage.success(features), {})
-        return self._observe(obs), info
+        return self._observe(obs, features), info
 
     def step(self, action: np.ndarray):
         action = np.asarray(action, dtype=np.float64)
@@ -193,7 +201,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         info = self._info(features, success, terms)
         if terminated or truncated:
             info["episode_reward_terms"] = dict(self._reward_sums)
-        return self._observe(obs), reward, terminated, truncated, info
+        return self._observe(obs, features), reward, terminated, truncated, info
 
     def _diverged(self) -> bool:
         data = self.backend.data
@@ -207,12 +215,17 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         info = self._info(features, False, dict.fromkeys(terms, 0.0))
         info.update(unstable=True, episode_reward_terms=dict(self._reward_sums))
         obs = np.nan_to_num(np.asarray(obs, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-        return self._observe(obs), 0.0, False, True, info
+        return self._observe(obs, features), 0.0, False, True, info
 
-    def _observe(self, obs: np.ndarray) -> np.ndarray:
+    def _observe(self, obs: np.ndarray, features: Features) -> np.ndarray:
+        if self._relative:  # object - tool, goal - object (see ObservationSpec.relative_positions)
+            tcp, obj, goal = (np.asarray(features[k], dtype=np.float64) for k in ("tcp_pos", "object_pos", "goal_pos"))
+            obs = np.concatenate([obs, np.nan_to_num(obj - tcp), np.nan_to_num(goal - obj)])
         obs = self._obs_noise(obs, self.np_random)
         if self._hide_goal:
             obs[self.backend.goal_slice] = 0.0
+            if self._relative:
+                obs[-3:] = 0.0  # goal - object would give the hidden goal away
         return obs.astype(np.float32)
 
     def _info(self, features: Features, success: bool, terms: dict[str, float]) -> dict[str, Any]:
