@@ -210,8 +210,9 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         print(textwrap.fill(", ".join(found) or "-", width=110, initial_indent=f"  {kind} ({len(found)}): ",
                             subsequent_indent="      "))
     trace = scripted_trace(env, stage, seed=args.seed, goal_index=args.goal)
+    first = trace.first_success
     print(f"\nstage {stage}, {args.split} goal {args.goal}, scripted policy {trace.policy}: "
-          f"{'succeeds at step ' + str(next(int(r[0]) for r in trace.rows if r[-1])) if any(r[-1] for r in trace.rows) else 'never succeeds'}")
+          f"{'never succeeds' if first is None else f'succeeds at step {first}'}")
     print(trace.table(args.every))
     if args.csv:
         trace.write_csv(Path(args.csv))

@@ -59,10 +59,16 @@ class Trace:
             writer.writerow(self.columns)
             writer.writerows(self.rows)
 
+    @property
+    def first_success(self) -> int | None:
+        """The first step at which the stage's success held, or None."""
+        column = self.columns.index("success")
+        return next((int(r[0]) for r in self.rows if r[column]), None)
+
     def table(self, every: int) -> str:
         """Every `every`-th step, the first step the stage succeeds, and the last step."""
-        succeed = next((r for r in self.rows if r[self.columns.index("success")]), None)
-        chosen = [r for r in self.rows if int(r[0]) % every == 0 or r is succeed or r is self.rows[-1]]
+        succeed = self.first_success
+        chosen = [r for r in self.rows if int(r[0]) % every == 0 or int(r[0]) == succeed or r is self.rows[-1]]
         cells = [self.columns] + [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in r] for r in chosen]
         widths = [max(len(row[i]) for row in cells) for i in range(len(self.columns))]
         lines = ["  ".join(c.rjust(w) for c, w in zip(row, widths)) for row in cells]

@@ -184,6 +184,7 @@ class _Session:
     def build_envs(self) -> tuple[VectorEnv, CurriculumDriver]:
         """The current phase's training envs (a new phase is a new task file: new envs, same agent)."""
         phase = self.cur.phases[self.scheduler.phase]
+        self.say(f"starting {self.cur.agent.ppo.num_envs} envs of phase {self.scheduler.phase} ({phase.task_file})")
         privileged = self.cur.agent.asymmetric_critic
         fns = [partial(_train_env, phase.task, str(phase.task_file), privileged, self.cur.agent)] * self.cur.agent.ppo.num_envs
         envs = make_vector_env(fns, self.cur.agent.runtime)
@@ -195,7 +196,6 @@ class _Session:
         next_ckpt = (agent.global_step // every_ckpt + 1) * every_ckpt
         next_eval = (agent.global_step // every_eval + 1) * every_eval
         previous_term = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-        self.say(f"starting {self.cur.agent.ppo.num_envs} envs of phase {self.scheduler.phase} ({self.cur.phases[self.scheduler.phase].task_file})")
         envs, driver = self.build_envs()
         # tqdm's own rate (steps/s since the start, in the bar) and the last update's (postfix)
         self.bar = tqdm(total=self.total, initial=agent.global_step, unit=" env steps", disable=not self.progress,
@@ -212,7 +212,6 @@ class _Session:
                 self.logger.log(agent.global_step, record)
                 if self.scheduler.phase != driver.phase:
                     envs.close()
-                    self.say(f"starting the envs of phase {self.scheduler.phase} ({self.cur.phases[self.scheduler.phase].task_file})")
                     envs, driver = self.build_envs()
                     agent.reset_envs()
                 self.last_good = self.snapshot()
