@@ -39,6 +39,7 @@ def test_dagger_labels_are_the_scripted_action_at_the_states_the_student_visits(
     spec = agent_spec(policy={"hidden_sizes": [32, 32], "init_log_std": -0.5}, ppo=SMALL_PPO, runtime={"vector": "sync"})
     probe = TaskEnv(task, task_file)
     agent = PPOAgent(spec, probe.observation_space, probe.action_space, seed=3)
+    obs_dim = probe.observation_space.shape[0]
     probe.close()
     fns = [lambda: ExpertLabels(TaskEnv(task, task_file, stage="place"), "place") for _ in range(2)]
     envs = make_vector_env(fns, spec.runtime)
@@ -46,11 +47,12 @@ def test_dagger_labels_are_the_scripted_action_at_the_states_the_student_visits(
         batch = student_rollout(agent, envs, steps=120, seed=5)
     finally:
         envs.close()
-    assert batch.observations.shape == (120, 39) and batch.expert_actions.shape == (120, 4)
+    assert obs_dim == 39 + 6 and batch.observations.shape == (120, obs_dim) and batch.expert_actions.shape == (120, 4)
     expert = ENV_POLICY_MAP["pick-place-v3"]()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        recomputed = np.stack([np.clip(expert.get_action(o.astype(np.float64)), -1, 1) for o in batch.observations])
+        # Meta-World's policy parses its own 39 floats, not the relative positions taskforge appends
+        recomputed = np.stack([np.clip(expert.get_action(o[:39].astype(np.float64)), -1, 1) for o in batch.observations])
     np.testing.assert_allclose(batch.expert_actions, recomputed, atol=1e-5)
     # the states are the student's: an untrained policy does not follow the expert's path to the puck
     hand, puck = batch.observations[:, 0:3], batch.observations[:, 4:7]
@@ -142,7 +144,7 @@ def test_a_warm_started_run_keeps_its_success_when_ppo_takes_over(tmp_path):
     # DAgger's labels are kept, so a resumed run reinstalls the BC term on demos + labels, and
     # neither pretrains again nor restarts the critic warm-up
     with np.load(run / "dagger.npz") as labelled:
-        assert labelled["observations"].shape == (1_200, 39) and labelled["actions"].shape == (1_200, 4)
+        assert labelled["observations"].shape == (1_200, 39 + 6)  # + relative positions and labelled["actions"].shape == (1_200, 4)
     end = records[-1]["step"]
     train(cur, run_dir=run, steps=end + 1_200, resume=True, progress=False)
     resumed = [r for r in read_jsonl(run / "metrics.jsonl") if r["step"] > end]

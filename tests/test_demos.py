@@ -125,7 +125,7 @@ def test_demos_command_writes_a_well_formed_file_and_refuses_to_overwrite(tmp_pa
         assert {"observations", "actions", "rewards", "successes", "episode_starts", "terminated", "truncated",
                 "episode_lengths", "episode_success", "goal_indices", "metadata", "privileged"} <= keys
         n = int(data["episode_lengths"].sum())
-        assert data["observations"].shape == (n, 39) and data["actions"].shape == (n, 4)
+        assert data["observations"].shape == (n, 39 + 6)  # + relative positions and data["actions"].shape == (n, 4)
         assert data["rewards"].shape == data["successes"].shape == data["episode_starts"].shape == (n,)
         assert data["episode_starts"].sum() == 3 and data["truncated"].sum() == 3 and data["episode_success"].all()
         assert np.abs(data["actions"]).max() <= 1.0

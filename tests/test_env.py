@@ -69,8 +69,9 @@ def test_hidden_and_observable_goal_differ_only_in_goal_slice(pick_place_doc):
         obs = [e.step(action)[0] for e in envs]
     goal = envs[0].backend.goal_slice
     hidden, shown = obs
-    np.testing.assert_array_equal(np.delete(hidden, np.r_[goal]), np.delete(shown, np.r_[goal]))
-    assert np.all(hidden[goal] == 0.0)
+    goal_minus_object = np.r_[len(shown) - 3:len(shown)]  # observation.relative_positions' last 3 floats
+    np.testing.assert_array_equal(np.delete(hidden, np.r_[goal, goal_minus_object]), np.delete(shown, np.r_[goal, goal_minus_object]))
+    assert np.all(hidden[goal] == 0.0) and np.all(hidden[goal_minus_object] == 0.0)
     true_goal = envs[1].features()["goal_pos"]
     assert np.abs(shown[goal] - true_goal).max() < 0.02  # the goal, plus observation noise
 
@@ -169,7 +170,7 @@ def test_scripted_pick_place_grasps_lifts_and_places(pick_place_doc, object_star
     obs, _ = env.reset()
     picked = placed = False
     for _ in range(300):
-        obs, _, _, _, info = env.step(policy.get_action(obs.astype(np.float64)))
+        obs, _, _, _, info = env.step(policy.get_action(obs[:39].astype(np.float64)))  # its own 39 floats
         f = env.features()
         assert f["object_grasped"] == float(env.backend._active.touching_main_object)
         picked |= pick.success(f)
@@ -253,6 +254,7 @@ def test_ml1_goal_cache_on_disk_round_trips_and_survives_corruption(tmp_path, mo
 def test_relative_positions_append_object_minus_tool_and_goal_minus_object(task_file):
     doc = yaml.safe_load(task_file.read_text())
     doc["randomization"] = {}  # no noise: the appended floats are exact
+    doc["observation"] = {"relative_positions": False}
     plain = env_from(doc, stage="place")
     doc["observation"] = {"relative_positions": True}
     env = env_from(doc, stage="place")

@@ -331,7 +331,7 @@ def test_asymmetric_critic_trains_on_meta_world_privileged_features(tmp_path):
     policy = load_checkpoint(run / "final.pt")["agent"]["policy"]
     actor_in = next(v for k, v in policy.items() if k.startswith("actor") and k.endswith("weight")).shape[1]
     critic_in = next(v for k, v in policy.items() if k.startswith("critic") and k.endswith("weight")).shape[1]
-    assert actor_in == 39 and critic_in > 39 + 6  # obs + velocity, goal and the physics draws
+    assert actor_in == 39 + 6 and critic_in > actor_in + 6  # obs (+ relative positions) + velocity, goal and the physics draws
 
 
 def test_asymmetric_critic_without_privileged_features_is_a_clear_error(tmp_path, capsys):

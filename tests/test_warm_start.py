@@ -26,7 +26,8 @@ from tests.test_training import AGENT, TASK
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
-OBS, ACT = Box(-np.inf, np.inf, (39,), np.float32), Box(-1.0, 1.0, (4,), np.float32)
+# Meta-World's 39 floats + the relative positions pick_place.yaml appends
+OBS, ACT = Box(-np.inf, np.inf, (39 + 6,), np.float32), Box(-1.0, 1.0, (4,), np.float32)
 
 
 def small_agent(seed: int = 0, **policy) -> PPOAgent:
@@ -261,7 +262,7 @@ def test_training_generates_metaworld_demos_and_keeps_them_for_resume(tmp_path):
     kept = run / "demos.npz"
     with np.load(kept) as data:
         meta = json.loads(str(data["metadata"]))
-        assert meta["stage"] == "reach" and meta["episodes_run"] == 2 and data["observations"].shape[1] == 39
+        assert meta["stage"] == "reach" and meta["episodes_run"] == 2 and data["observations"].shape[1] == 39 + 6
     first = read_jsonl(run / "metrics.jsonl")[0]
     assert meta["steps_run"] == 2 * 150  # both reach episodes ran to the stage's time limit
     assert first["step"] == meta["steps_run"] and first["bc_demo_episodes"] == meta["episodes_kept"]

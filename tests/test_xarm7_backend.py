@@ -86,7 +86,7 @@ def test_check_env_passes(task_file, stage):
 def test_spaces_timing_and_observation_layout():
     env = taskforge.make(PICK_PLACE, seed=0)
     backend = env.unwrapped.backend
-    assert env.action_space.shape == (4,) and env.observation_space.shape == (OBS_SIZE,)
+    assert env.action_space.shape == (4,) and env.observation_space.shape == (OBS_SIZE + 6,)  # + relative positions
     assert backend.dt == pytest.approx(0.05) and backend.substeps == 25
     assert backend.model("xarm7").opt.timestep == pytest.approx(0.002)
     assert backend.object_geoms("xarm7") == ["object_geom"]

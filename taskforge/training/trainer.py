@@ -171,11 +171,12 @@ class _Session:
         self.last_good = self.snapshot()  # what a Ctrl-C saves: the state after the last complete update
 
     def say(self, line: str) -> None:
-        """A progress line, prefixed with the step (through the bar when there is one)."""
+        """A progress line, prefixed with the step: through the bar when there is one (it keeps
+        the bar below the line), printed either way, so logs of `--no-progress` runs have them."""
         line = f"[{self.agent.global_step:,}] {line}"
         if self.bar is not None:
-            self.bar.write(line)
-        elif self.progress:
+            self.bar.write(line, file=sys.stderr)
+        else:
             print(line, file=sys.stderr)
 
     def snapshot(self) -> dict[str, Any]:
