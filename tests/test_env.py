@@ -35,7 +35,7 @@ def test_check_env_passes_for_each_stage(stage):
 
 
 def test_info_carries_stage_success_terms_and_native_success():
-    env = taskforge.make(PICK_PLACE, stage="place", seed=0)
+    env = taskforge.make(PICK_PLACE, stage="place", seed=0, native=True)
     env.reset()
     _, reward, _, _, info = env.step(env.action_space.sample())
     assert set(info["reward_terms"]) == {"tcp_to_object", "grasp", "lift", "object_to_goal", "stage_success", "action_l2"}
@@ -164,7 +164,7 @@ def test_scripted_pick_place_grasps_lifts_and_places(pick_place_doc, object_star
     doc = copy.deepcopy(pick_place_doc)
     doc["goals"]["observable"] = True  # the scripted policy reads the goal from the observation
     doc["randomization"] = {"object_start": object_start}
-    env = env_from(doc, stage="place", seed=1)
+    env = env_from(doc, stage="place", seed=1, native=True)  # Meta-World's own success flag too
     policy = SawyerPickPlaceV3Policy()
     pick = env.stages["pick"]
     obs, _ = env.reset()

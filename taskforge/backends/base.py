@@ -57,6 +57,10 @@ class Backend(Protocol):
     """Where the goal sits in the observation; zeroed by the env when the goal is hidden."""
     dt: float
     """Seconds of simulated time per control step."""
+    native: bool
+    """Whether `features()` must carry the suite's own reward and success (`native_*`). The env
+    sets it from what its stages read; a backend for which they are costly (Meta-World) skips
+    them while it is off, one for which they are free may ignore it."""
 
     def model(self, task_name: str) -> mujoco.MjModel | None:
         """The compiled MuJoCo model of a sub-task, for physics randomisation (changed in

@@ -28,6 +28,7 @@ TEST_SEED_OFFSET = 1_000_000
 
 class GymnasiumBackend:
     provides = PROVIDES
+    native = True  # its native features are the wrapped env's own reward and flags: always computed
     goal_slice = slice(0, 0)  # no goal in the observation
 
     def __init__(self, spec: GymnasiumBackendSpec, goals: GoalsSpec):

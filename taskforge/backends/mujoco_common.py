@@ -31,7 +31,10 @@ def _log_warning(message: str) -> None:
 
 mujoco.set_mju_user_warning(_log_warning)
 
-_DIVERGENCE_WARNINGS = [int(w) for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL)]
+_BAD = sorted(int(w) for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL))
+assert _BAD == list(range(_BAD[0], _BAD[0] + 3)), "MuJoCo's bad-state warnings are no longer adjacent"
+_DIVERGENCE_WARNINGS = slice(_BAD[0], _BAD[0] + 3)
+"""A slice, not a list of indices: `diverged` runs every step and fancy indexing costs more."""
 
 
 def override_goal(goal: np.ndarray, rest: np.ndarray, override: GoalOverride) -> np.ndarray:
@@ -84,4 +87,4 @@ def diverged(data: mujoco.MjData) -> bool:
     velocity (it then silently resets the state, so the episode goes on from nonsense), or the
     velocities are no longer finite (positions: the env checks the observation). Extreme randomisation or actions can cause it; the env ends the
     episode instead of learning from it."""
-    return bool(data.warning.number[_DIVERGENCE_WARNINGS].any()) or not math.isfinite(data.qvel.sum())  # NaN/inf if any entry is
+    return any(data.warning.number[_DIVERGENCE_WARNINGS].tolist()) or not math.isfinite(data.qvel.sum())  # NaN/inf if any entry is

@@ -29,6 +29,7 @@ def make(
     seed: int | None = None,
     task: str | None = None,
     privileged: bool = False,
+    native: bool | None = None,
 ) -> TaskEnv:
     """A Gymnasium env for one stage of a task file.
 
@@ -39,9 +40,11 @@ def make(
         seed: seeds the first `reset()` (goal choice, randomisation, noise).
         task: for a task set (MT10), pin one sub-task; default sample one per episode.
         privileged: add `info["privileged"]` for an asymmetric critic.
+        native: compute the suite's own reward and success every step (`info["native_success"]`);
+            default only when a stage reads them (they are ~40 % of a Meta-World step).
     """
     spec = load_task(task_file)
-    return TaskEnv(spec, task_file, stage=stage, split=split, seed=seed, task_name=task, privileged=privileged)
+    return TaskEnv(spec, task_file, stage=stage, split=split, seed=seed, task_name=task, privileged=privileged, native=native)
 
 
 @dataclass(frozen=True)

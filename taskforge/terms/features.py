@@ -45,6 +45,9 @@ GOAL_FEATURES = frozenset({"goal_pos", "object_to_goal_distance", "tcp_to_goal_d
 """Features that depend on where the goal is (Meta-World's own success flag measures to its goal):
 a success condition on one of them cannot be met on a held-out goal the policy neither sees nor
 can infer."""
+NATIVE_FEATURES = frozenset({"native_reward", "native_success", "native_return"})
+"""The simulator suite's own reward and success: a backend may skip computing them (Meta-World:
+~40 % of its step) unless a stage reads one (`Backend.native`)."""
 ENV_FEATURES = frozenset({"action", "stage_success"})
 """Filled by the env itself on every backend."""
 SCALAR_FEATURES = frozenset(name for name, info in FEATURES.items() if info.size == 1)

@@ -38,6 +38,8 @@ class CompiledStage:
         self.spec = spec
         self.name = spec.name
         self.terms = _bind_terms(spec)
+        self.reads = frozenset(f for t in spec.rewards for f in REWARD_TERMS[t.term].reads) | {c.feature for c in spec.success.all}
+        """Every feature the stage's terms and success condition read."""
         # (feature, below, above) with +-inf standing in for a missing bound.
         self._conditions = [
             (c.feature, float("inf") if c.below is None else c.below,
