@@ -10,6 +10,11 @@ batch per worker: per-env info merging in the main process was ~0.3 ms of every 
 in which every worker waits (benchmarks/env_speed.py). Semantics match gymnasium's SAME_STEP
 autoreset exactly (the same `final_obs` / `final_info` layout; tested against SyncVectorEnv).
 
+`send_step(k, actions)` / `recv_step(k)` step one worker's slice (`shards[k]`) without waiting for
+the others: PPO's overlapped collection (`runtime.overlap`) chooses one slice's next actions
+while the other slices step. `set_attr` expects no reply, so it may be sent while a slice is
+stepping: each worker applies it after the step it is running (its pipe is first in, first out).
+
 Workers ignore SIGINT: on Ctrl-C the main process saves its checkpoint and closes them.
 """
 
@@ -68,11 +73,10 @@ def _worker(pipe, env_fns: list[EnvFn]) -> None:
                     infos = batcher._add_info(infos, info, i)
                     obs.append(o)
                 pipe.send(("ok", (np.stack(obs), infos)))
-            elif command == "set_attr":
+            elif command == "set_attr":  # no reply (see module doc); a failure is the next reply
                 name, values = payload
                 for env, value in zip(envs, values):
                     setattr(env.unwrapped, name, value)
-                pipe.send(("ok", None))
             elif command == "get_attr":
                 pipe.send(("ok", [getattr(env.unwrapped, payload) for env in envs]))
             elif command == "close":
@@ -120,10 +124,12 @@ class ShardedVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
 
         bounds = np.linspace(0, self.num_envs, num_workers + 1).astype(int)
-        self._slices = [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+        self.shards = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+        """The envs of each worker, in order."""
+        self._in_flight: set[int] = set()
         ctx = mp.get_context()
         self._pipes, self._procs = [], []
-        for sl in self._slices:
+        for sl in self.shards:
             parent, child = ctx.Pipe()
             proc = ctx.Process(target=_worker, args=(child, list(env_fns[sl])), daemon=True)
             proc.start()
@@ -133,37 +139,55 @@ class ShardedVectorEnv(VectorEnv):
         self.closed = False
 
     def _all(self, messages: Sequence[tuple[str, Any]]) -> list[Any]:
+        if self._in_flight:
+            raise RuntimeError(f"workers {sorted(self._in_flight)} are still stepping: recv_step them first")
         for pipe, message in zip(self._pipes, messages):
             pipe.send(message)
-        replies = []
-        for pipe in self._pipes:
-            status, value = pipe.recv()
-            if status == "error":
-                raise RuntimeError(f"a vector-env worker failed:\n{value}")
-            replies.append(value)
-        return replies
+        return [self._reply(k) for k in range(len(self._pipes))]
+
+    def _reply(self, k: int) -> Any:
+        status, value = self._pipes[k].recv()
+        if status == "error":
+            raise RuntimeError(f"a vector-env worker failed:\n{value}")
+        return value
+
+    def send_step(self, k: int, actions: np.ndarray) -> None:
+        """Start stepping worker k's envs (`shards[k]`) with `actions` (one row per env)."""
+        if k in self._in_flight:
+            raise RuntimeError(f"worker {k} is still stepping: recv_step({k}) first")
+        self._pipes[k].send(("step", actions))
+        self._in_flight.add(k)
+
+    def recv_step(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Worker k's step results, as a vector env of its envs alone would return them."""
+        if k not in self._in_flight:
+            raise RuntimeError(f"worker {k} is not stepping: send_step({k}, ...) first")
+        self._in_flight.discard(k)
+        return self._reply(k)
+
+    def merge_infos(self, shards: Sequence[dict[str, Any]]) -> dict[str, Any]:
+        """The workers' batched infos (one per worker, in order) as one vector env's: each array
+        the concatenation of the workers' rows, a worker without a key contributing blank rows
+        (mask false), as gymnasium's `_add_info` would have left them."""
+        return _merge_infos(list(shards), [sl.stop - sl.start for sl in self.shards])
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         seeds = [None if seed is None else seed + i for i in range(self.num_envs)]
-        replies = self._all([("reset", {"seeds": seeds[sl], "options": options}) for sl in self._slices])
-        return np.concatenate([obs for obs, _ in replies]), self._merge([infos for _, infos in replies])
+        replies = self._all([("reset", {"seeds": seeds[sl], "options": options}) for sl in self.shards])
+        return np.concatenate([obs for obs, _ in replies]), self.merge_infos([infos for _, infos in replies])
 
     def step(self, actions: np.ndarray):
-        replies = self._all([("step", actions[sl]) for sl in self._slices])
-        obs, rewards, terminated, truncated, infos = zip(*replies)
-        return np.concatenate(obs), np.concatenate(rewards), np.concatenate(terminated), np.concatenate(truncated), self._merge(infos)
-
-    def _merge(self, shards: Sequence[dict[str, Any]]) -> dict[str, Any]:
-        """The workers' batched infos as one vector env's: each array the concatenation of the
-        workers' rows, a worker without a key contributing blank rows (mask false), as
-        gymnasium's `_add_info` would have left them."""
-        sizes = [sl.stop - sl.start for sl in self._slices]
-        return _merge_infos(list(shards), sizes)
+        for k, sl in enumerate(self.shards):
+            self.send_step(k, actions[sl])
+        obs, rewards, terminated, truncated, infos = zip(*(self.recv_step(k) for k in range(len(self.shards))))
+        return np.concatenate(obs), np.concatenate(rewards), np.concatenate(terminated), np.concatenate(truncated), self.merge_infos(infos)
 
     def set_attr(self, name: str, values: Any) -> None:
+        """Sent without waiting for a reply: allowed while workers step (module doc)."""
         if not isinstance(values, (list, tuple)):
             values = [values] * self.num_envs
-        self._all([("set_attr", (name, list(values[sl]))) for sl in self._slices])
+        for pipe, sl in zip(self._pipes, self.shards):
+            pipe.send(("set_attr", (name, list(values[sl]))))
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
         return tuple(v for shard in self._all([("get_attr", name)] * len(self._pipes)) for v in shard)
@@ -172,6 +196,8 @@ class ShardedVectorEnv(VectorEnv):
         if self.closed:
             return
         try:
+            for k in sorted(self._in_flight):  # a collection interrupted mid-step: take its results
+                self.recv_step(k)
             self._all([("close", None)] * len(self._pipes))
         except (BrokenPipeError, EOFError, RuntimeError):
             pass

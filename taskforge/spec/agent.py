@@ -94,6 +94,10 @@ class RuntimeSpec(StrictModel):
     """Torch threads while collecting: one, so the env workers keep the other cores."""
     update_threads: int | None = Field(default=None, ge=1, le=256)
     """Torch threads during the PPO update; default every core (the workers wait meanwhile)."""
+    overlap: bool = False
+    """`sharded` with 2+ workers and an MLP policy: choose each worker's next actions as soon as
+    its own step is back, while the other workers step (a double-buffered collector), instead of
+    stepping all workers in lockstep."""
 
 
 class AgentSpec(StrictModel):
