@@ -1,14 +1,20 @@
-"""Training throughput on pick-place-v3: taskforge PPO vs Stable-Baselines3 PPO with the same
-hyperparameters, and the raw simulator on the same core count, in one run.
+"""Training throughput on pick-place-v3: taskforge PPO (lockstep and overlapped collection) vs
+Stable-Baselines3 PPO with the same hyperparameters, and the envs alone, in one run.
 
     python benchmarks/ppo_throughput.py [--updates 4] [--agent agents/ppo.yaml]
 
-Both learners train on the same env (taskforge's pick-place `place` stage, full randomisation),
-vectorised over `num_envs` worker processes, with the preset's rollout length, epochs, minibatch
-size and network (separate 256x256 tanh actor and critic), observation and reward normalisation,
-and one torch thread each. The first update is warm-up (process start, goal generation) and is
-not timed. "Raw sim" steps the bare Meta-World env with random actions in the same number of
-worker processes: the ceiling for any learner on this machine.
+Rows, each over every core:
+- "taskforge env alone": taskforge's pick-place `place` env (full randomisation) in the sharded
+  vector env, random actions: the ceiling for a learner on it;
+- "Meta-World's own env alone": the bare Meta-World env, same vectorisation;
+- taskforge PPO, lockstep collection (`runtime.overlap: false`) and overlapped (`true`);
+- SB3 PPO on the same taskforge env (SubprocVecEnv, one process per env; VecNormalize): learner
+  against learner;
+- SB3 PPO on Meta-World's own env: what a user of SB3 and Meta-World runs.
+All learners use the preset's rollout length, epochs, minibatch size and network (separate
+256x256 tanh actor and critic), observation and reward normalisation, and one torch thread while
+collecting. The first update of each is warm-up (process start, goal generation), not timed.
+Goals (issue 19): taskforge PPO >= 2 x SB3 PPO; >= 0.75 x the taskforge env alone.
 """
 
 from __future__ import annotations
@@ -56,6 +62,10 @@ def raw_env():
     return Raw()
 
 
+def with_runtime(spec, **runtime):
+    return spec.model_copy(update={"runtime": spec.runtime.model_copy(update=runtime)})
+
+
 def time_taskforge(spec, updates: int) -> float:
     envs = make_vector_env([partial(task_env, i) for i in range(spec.ppo.num_envs)], spec.runtime)
     agent = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
@@ -70,13 +80,13 @@ def time_taskforge(spec, updates: int) -> float:
     return sps
 
 
-def time_sb3(spec, updates: int) -> float:
+def time_sb3(spec, updates: int, make_env) -> float:
     from stable_baselines3 import PPO
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import SubprocVecEnv, VecNormalize
 
     ppo, policy = spec.ppo, spec.policy
-    venv = make_vec_env(task_env, n_envs=ppo.num_envs, vec_env_cls=SubprocVecEnv)
+    venv = make_vec_env(make_env, n_envs=ppo.num_envs, vec_env_cls=SubprocVecEnv)
     venv = VecNormalize(venv, norm_obs=ppo.norm_obs, norm_reward=ppo.norm_reward, gamma=ppo.gamma)
     batch = ppo.num_envs * ppo.rollout_steps
     model = PPO(
@@ -95,9 +105,10 @@ def time_sb3(spec, updates: int) -> float:
     return sps
 
 
-def time_raw(spec, updates: int) -> float:
+def time_env(spec, updates: int, make_env) -> float:
+    """Random actions through the learner's vectorisation: the env alone."""
     n, steps = spec.ppo.num_envs, spec.ppo.rollout_steps * (updates + 1)
-    envs = make_vector_env([raw_env] * n, spec.runtime)  # the same vectorisation as the learner
+    envs = make_vector_env([make_env] * n, spec.runtime)
     envs.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1, 1, (steps, n, 4)).astype(np.float32)
     envs.step(actions[0])
@@ -117,26 +128,33 @@ def main() -> None:
     spec = load_agent_spec(args.agent)
     torch.set_num_threads(spec.runtime.torch_threads)
 
-    raw = time_raw(spec, args.updates)
-    ours = time_taskforge(spec, args.updates)
-    sb3 = time_sb3(spec, args.updates)
-    rows = [["raw Meta-World (random actions)", raw, "-"],
-            ["taskforge PPO", ours, f"{ours / raw:.2f} of raw"],
-            ["Stable-Baselines3 PPO", sb3, f"{sb3 / raw:.2f} of raw"]]
-    print_table(["learner", "steps/s", "vs raw"], rows)
-    print(f"taskforge / SB3 = {ours / sb3:.2f} (goal >= 2); taskforge / raw = {ours / raw:.2f} (goal >= 0.75)")
+    results = {
+        "taskforge env alone": time_env(spec, args.updates, task_env),
+        "Meta-World's own env alone": time_env(spec, args.updates, raw_env),
+        "taskforge PPO, lockstep collection": time_taskforge(with_runtime(spec, overlap=False), args.updates),
+        "taskforge PPO, overlapped collection": time_taskforge(with_runtime(spec, overlap=True), args.updates),
+        "SB3 PPO on the taskforge env": time_sb3(spec, args.updates, task_env),
+        "SB3 PPO on Meta-World's own env": time_sb3(spec, args.updates, raw_env),
+    }
+    env_alone, sb3 = results["taskforge env alone"], results["SB3 PPO on the taskforge env"]
+    best = max(results["taskforge PPO, lockstep collection"], results["taskforge PPO, overlapped collection"])
+    print_table(["", "steps/s", "x taskforge env alone", "x SB3 (same env)"],
+                [[name, sps, f"{sps / env_alone:.2f}", f"{sps / sb3:.2f}"] for name, sps in results.items()])
+    over_sb3, over_env = best / sb3, best / env_alone
+    over_sb3_mw = best / results["SB3 PPO on Meta-World's own env"]
+    print(f"taskforge PPO (faster collection) / SB3 PPO, same env = {over_sb3:.2f} (goal >= 2); "
+          f"/ SB3 PPO on Meta-World's own env = {over_sb3_mw:.2f}; / taskforge env alone = {over_env:.2f} (goal >= 0.75)")
     batch = spec.ppo.num_envs * spec.ppo.rollout_steps
     path = write_result("ppo_throughput", {
         "agent_preset": args.agent,
-        "workers": spec.ppo.num_envs,
+        "num_envs": spec.ppo.num_envs,
         "timed_steps_per_learner": batch * args.updates,
         "torch_threads": spec.runtime.torch_threads,
-        "raw_steps_per_s": raw,
-        "taskforge_steps_per_s": ours,
-        "sb3_steps_per_s": sb3,
-        "taskforge_over_sb3": ours / sb3,
-        "taskforge_over_raw": ours / raw,
-        "goals": {"taskforge_over_sb3": ">= 2", "taskforge_over_raw": ">= 0.75"},
+        "steps_per_s": results,
+        "taskforge_over_sb3_same_env": over_sb3,
+        "taskforge_over_sb3_metaworld_env": over_sb3_mw,
+        "taskforge_over_env_alone": over_env,
+        "goals": {"taskforge_over_sb3": ">= 2", "taskforge_over_env_alone": ">= 0.75"},
         "versions": versions("torch", "stable-baselines3", "metaworld", "mujoco", "gymnasium"),
     })
     print(f"wrote {path}")
