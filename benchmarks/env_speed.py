@@ -100,7 +100,7 @@ def single(make: Callable[[], gymnasium.Env], actions: np.ndarray) -> float:
 
 def vectorised(make: Callable[[], gymnasium.Env], actions: np.ndarray, cores: int, per_core: int) -> float:
     n = cores * per_core
-    envs = ShardedVectorEnv([make] * n, num_workers=cores)
+    envs = ShardedVectorEnv([make] * n, num_shards=cores)
     envs.reset(seed=0)
     batches = actions[: len(actions) // n * n].reshape(-1, n, actions.shape[1])
     start = time.perf_counter()

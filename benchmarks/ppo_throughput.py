@@ -1,5 +1,5 @@
-"""Training throughput on pick-place-v3: taskforge PPO (lockstep and overlapped collection) vs
-Stable-Baselines3 PPO with the same hyperparameters, and the envs alone, in one run.
+"""Training throughput on pick-place-v3: taskforge PPO vs Stable-Baselines3 PPO with the same
+hyperparameters, and the envs alone, in one run.
 
     python benchmarks/ppo_throughput.py [--updates 4] [--agent agents/ppo.yaml]
 
@@ -7,7 +7,7 @@ Rows, each over every core:
 - "taskforge env alone": taskforge's pick-place `place` env (full randomisation) in the sharded
   vector env, random actions: the ceiling for a learner on it;
 - "Meta-World's own env alone": the bare Meta-World env, same vectorisation;
-- taskforge PPO, lockstep collection (`runtime.overlap: false`) and overlapped (`true`);
+- taskforge PPO (sharded vector env: one worker process plus the main process on 2 cores);
 - SB3 PPO on the same taskforge env (SubprocVecEnv, one process per env; VecNormalize): learner
   against learner;
 - SB3 PPO on Meta-World's own env: what a user of SB3 and Meta-World runs.
@@ -60,10 +60,6 @@ def raw_env():
             return super().reset()
 
     return Raw()
-
-
-def with_runtime(spec, **runtime):
-    return spec.model_copy(update={"runtime": spec.runtime.model_copy(update=runtime)})
 
 
 def time_taskforge(spec, updates: int) -> float:
@@ -131,18 +127,17 @@ def main() -> None:
     results = {
         "taskforge env alone": time_env(spec, args.updates, task_env),
         "Meta-World's own env alone": time_env(spec, args.updates, raw_env),
-        "taskforge PPO, lockstep collection": time_taskforge(with_runtime(spec, overlap=False), args.updates),
-        "taskforge PPO, overlapped collection": time_taskforge(with_runtime(spec, overlap=True), args.updates),
+        "taskforge PPO": time_taskforge(spec, args.updates),
         "SB3 PPO on the taskforge env": time_sb3(spec, args.updates, task_env),
         "SB3 PPO on Meta-World's own env": time_sb3(spec, args.updates, raw_env),
     }
     env_alone, sb3 = results["taskforge env alone"], results["SB3 PPO on the taskforge env"]
-    best = max(results["taskforge PPO, lockstep collection"], results["taskforge PPO, overlapped collection"])
+    best = results["taskforge PPO"]
     print_table(["", "steps/s", "x taskforge env alone", "x SB3 (same env)"],
                 [[name, sps, f"{sps / env_alone:.2f}", f"{sps / sb3:.2f}"] for name, sps in results.items()])
     over_sb3, over_env = best / sb3, best / env_alone
     over_sb3_mw = best / results["SB3 PPO on Meta-World's own env"]
-    print(f"taskforge PPO (faster collection) / SB3 PPO, same env = {over_sb3:.2f} (goal >= 2); "
+    print(f"taskforge PPO / SB3 PPO, same env = {over_sb3:.2f} (goal >= 2); "
           f"/ SB3 PPO on Meta-World's own env = {over_sb3_mw:.2f}; / taskforge env alone = {over_env:.2f} (goal >= 0.75)")
     batch = spec.ppo.num_envs * spec.ppo.rollout_steps
     path = write_result("ppo_throughput", {

@@ -308,39 +308,3 @@ def test_same_seed_gives_identical_parameters(policy):
     assert all(torch.equal(a, b) for a, b in zip(first, second))
     assert not all(torch.equal(a, c) for a, c in zip(first, other))
 
-
-# ------------------------------------------------------------------------- overlapped collection
-
-def test_overlapped_collection_is_on_policy_complete_and_seeded():
-    """`runtime.overlap` on 2 workers: every stored action was sampled from the current policy at
-    the stored observation (log-prob and value recomputed match), every env step reaches
-    `on_step` once with its episode ends and every truncation is bootstrapped; the same seed
-    gives the same rollout, and PPO still learns from it."""
-    spec = agent_spec(policy={"hidden_sizes": [32]}, ppo={**SMALL_PPO, "num_envs": 4},
-                      runtime={"vector": "sharded", "workers": 2, "overlap": True})
-
-    def rollout(seed: int):
-        envs = pendulum_envs(spec, max_episode_steps=10)
-        assert len(envs.shards) == 2
-        agent = make_agent(spec, envs, seed=seed)
-        ends = []
-        agent.collect(envs, on_step=lambda r, te, tr, infos: ends.append(te | tr))
-        envs.close()
-        return agent, np.array(ends)
-
-    agent, ends = rollout(0)
-    buf = agent.buffer
-    assert agent.global_step == 4 * 32 and ends.shape == (32, 4)
-    np.testing.assert_array_equal(ends, (buf.terminated | buf.truncated).numpy())
-    assert ends.sum() == 4 * 3  # 10-step episodes: 3 per env in 32 steps
-    assert buf.final_values[buf.truncated].ne(0).all()
-    with torch.no_grad():
-        logprob, _, value = agent.policy.evaluate(buf.obs.flatten(0, 1)[None], buf.critic_obs.flatten(0, 1)[None],
-                                                  buf.actions.flatten(0, 1)[None], None, buf.episode_starts.flatten(0, 1)[None], agent.generator)
-    torch.testing.assert_close(logprob[0], buf.logprobs.flatten())
-    torch.testing.assert_close(value[0], buf.values.flatten())
-    again, _ = rollout(0)
-    assert torch.equal(again.buffer.actions, buf.actions) and torch.equal(again.buffer.rewards, buf.rewards)
-    before = parameters(agent)
-    agent.update()
-    assert not all(torch.equal(a, b) for a, b in zip(before, parameters(agent)))

@@ -45,7 +45,7 @@ def make_fns(n: int):
 @pytest.mark.parametrize("workers", [1, 2, 3])
 def test_matches_sync_vector_env_step_for_step(workers):
     sync = SyncVectorEnv(make_fns(5), autoreset_mode=AutoresetMode.SAME_STEP)
-    sharded = ShardedVectorEnv(make_fns(5), num_workers=workers)
+    sharded = ShardedVectorEnv(make_fns(5), num_shards=workers)
     assert sharded.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     a_obs, a_info = sync.reset(seed=11)
     b_obs, b_info = sharded.reset(seed=11)
@@ -70,7 +70,7 @@ def test_matches_sync_vector_env_step_for_step(workers):
 
 
 def test_worker_errors_reach_the_main_process():
-    envs = ShardedVectorEnv(make_fns(2), num_workers=2)
+    envs = ShardedVectorEnv(make_fns(2), num_shards=2)
     envs.reset(seed=0)
     with pytest.raises(RuntimeError, match="worker failed"):
         envs.get_attr("no_such_attribute")

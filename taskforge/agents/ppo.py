@@ -13,9 +13,7 @@ Differences from CleanRL, all deliberate:
   are saved with the networks and frozen for evaluation;
 * an optional asymmetric critic reads `concat(obs, info["privileged"])`;
 * an optional behaviour-cloning term on demonstrations, with a decaying weight (DAPG,
-  Rajeswaran et al. 2018; see `set_demo_regularizer` and `agents/bc.py` for the pretraining);
-* with `runtime.overlap` on the sharded vector env, collection chooses one worker's next actions
-  while the other workers step (see `_collect_overlapped`); the update is unchanged (on-policy).
+  Rajeswaran et al. 2018; see `set_demo_regularizer` and `agents/bc.py` for the pretraining).
 """
 
 from __future__ import annotations
@@ -32,7 +30,6 @@ from torch import nn
 from taskforge.agents.normalization import ObservationNormalizer, RewardScaler
 from taskforge.agents.policies import ActorCritic, RecurrentState
 from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
-from taskforge.agents.sharded import ShardedVectorEnv
 from taskforge.agents.storage import Minibatch, RolloutBuffer
 from taskforge.spec.agent import AgentSpec, PPOSpec
 
@@ -239,9 +236,6 @@ class PPOAgent:
             raise ValueError(f"the vector env has {envs.num_envs} envs but spec.ppo.num_envs is {ppo.num_envs}")
         if self._obs is None:
             self._reset(envs)
-        if self.spec.runtime.overlap and isinstance(envs, ShardedVectorEnv) and len(envs.shards) > 1 and not self.policy.recurrent:
-            self._collect_overlapped(envs, on_step)
-            return
         obs, critic_obs, episode_starts, state = self._obs, self._critic_obs, self._episode_starts, self._state
 
         for t in range(ppo.rollout_steps):
@@ -277,62 +271,6 @@ class PPOAgent:
             last_values, _ = self.policy.value(critic_obs[None], state, episode_starts[None])
         self.buffer.compute_advantages(last_values[0], ppo.gamma, ppo.gae_lambda)
         self._obs, self._critic_obs, self._episode_starts, self._state = obs, critic_obs, episode_starts, state
-        self._rollout_ready = True
-
-    def _collect_overlapped(self, envs: ShardedVectorEnv, on_step: OnStep | None) -> None:
-        """`collect` with policy inference overlapped with env stepping (MLP policies).
-
-        Lockstep collection leaves every worker idle while the main process chooses the next
-        actions (and waits on the slowest worker each step). Here each worker's slice of envs
-        gets its next actions as soon as its own step is back, so one slice's inference runs
-        while the other slices step: a double-buffered collector over the workers. The data are
-        the same kind (each action sampled from the current policy at the observation it acts
-        on; the update stays on-policy); what moves is only bookkeeping order: the observation
-        statistics are updated slice by slice, and the curriculum's `on_step` (and its
-        `set_attr`) runs once per step after the slices were sent on, so a worker's next-episode
-        choice lands one step later than in lockstep.
-        """
-        ppo = self.spec.ppo
-        obs, critic_obs, starts = self._obs, self._critic_obs, self._episode_starts
-        raw, logprob, value = torch.zeros(ppo.num_envs, *self.action_space.shape), torch.zeros(ppo.num_envs), torch.zeros(ppo.num_envs)
-
-        def launch(k: int, rows: slice) -> None:
-            """Sample worker k's actions from its envs' current observations and send them."""
-            with torch.no_grad():
-                r, lp, v, _ = self.policy.step(obs[None, rows], critic_obs[None, rows], None, starts[None, rows], self.generator)
-            raw[rows], logprob[rows], value[rows] = r[0], lp[0], v[0]
-            envs.send_step(k, self._to_env(r[0]))
-
-        for k, rows in enumerate(envs.shards):
-            launch(k, rows)
-        for t in range(ppo.rollout_steps):
-            acted = (obs.clone(), critic_obs.clone(), starts.clone(), raw.clone(), logprob.clone(), value.clone())
-            parts = []
-            for k, rows in enumerate(envs.shards):
-                part = envs.recv_step(k)
-                next_obs, _, terminated, truncated, infos = part
-                o, c = self._observe(next_obs, self._privileged(infos, np.arange(rows.stop - rows.start)), update=True)
-                obs[rows], critic_obs[rows], starts[rows] = o, c, torch.as_tensor(terminated | truncated)
-                if t + 1 < ppo.rollout_steps:
-                    launch(k, rows)  # this slice steps on while the next slice is read
-                parts.append(part)
-            reward, terminated, truncated = (np.concatenate([p[i] for p in parts]) for i in (1, 2, 3))
-            infos = envs.merge_infos([p[4] for p in parts])
-            self.global_step += envs.num_envs
-            if on_step is not None:
-                on_step(reward, terminated, truncated, infos)
-            a_obs, a_critic, a_starts, a_raw, a_logprob, a_value = acted
-            self.buffer.store(
-                t, obs=a_obs, critic_obs=a_critic, episode_starts=a_starts, actions=a_raw, logprobs=a_logprob, values=a_value,
-                rewards=self.reward_scaler(reward, terminated, truncated),
-                terminated=torch.as_tensor(terminated), truncated=torch.as_tensor(truncated),
-                final_values=self._truncation_values(infos, truncated & ~terminated, None),
-            )
-
-        with torch.no_grad():
-            last_values, _ = self.policy.value(critic_obs[None], None, starts[None])
-        self.buffer.compute_advantages(last_values[0], ppo.gamma, ppo.gae_lambda)
-        self._obs, self._critic_obs, self._episode_starts = obs, critic_obs, starts
         self._rollout_ready = True
 
     def _reset(self, envs: VectorEnv) -> None:

@@ -1,19 +1,21 @@
-"""A vector env that runs several envs per worker process ("shards").
+"""A vector env that splits its envs into slices ("shards"), one per core: the last stepped by
+the main process itself, each other one by a worker process.
 
 Why not gymnasium's AsyncVectorEnv: it spends one process per env, so on a 2-core machine eight
 Meta-World workers mean eight pipe round trips and a dozen context switches per vector step, and
-the main process (which runs the policy) is starved while it sends actions. Here `num_workers`
-processes (default: one per core) each step their slice of envs in a loop, so a vector step costs
-one round trip per core. Each worker also batches its own slice (observations stacked, infos
+the main process (which runs the policy) is starved while it sends actions. Here `num_shards`
+slices (default: one per core) each step their envs in a loop, so a vector step costs one round
+trip per worker process, and none for the main process's own slice (`_InProcess`: on this VM a
+process wake-up and round trip cost more than the 4 envs a worker steps; 8 taskforge envs ran at
+~3,100 steps/s over 2 worker processes, ~4,700 over 1 worker + the main process). Each worker also batches its own slice (observations stacked, infos
 merged with gymnasium's own `_add_info`), in parallel, and the main process only concatenates one
 batch per worker: per-env info merging in the main process was ~0.3 ms of every vector step, time
 in which every worker waits (benchmarks/env_speed.py). Semantics match gymnasium's SAME_STEP
 autoreset exactly (the same `final_obs` / `final_info` layout; tested against SyncVectorEnv).
 
-`send_step(k, actions)` / `recv_step(k)` step one worker's slice (`shards[k]`) without waiting for
-the others: PPO's overlapped collection (`runtime.overlap`) chooses one slice's next actions
-while the other slices step. `set_attr` expects no reply, so it may be sent while a slice is
-stepping: each worker applies it after the step it is running (its pipe is first in, first out).
+A double-buffered collector (PPO sampling one slice's next actions while the other slices step)
+was built and measured here, and removed: with the main process stepping a slice itself it
+collected ~15 % slower than lockstep (ARCHITECTURE.md, "Vector env").
 
 Workers ignore SIGINT: on Ctrl-C the main process saves its checkpoint and closes them.
 """
@@ -23,6 +25,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import signal
 import traceback
+from collections import deque
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -56,38 +59,78 @@ def _step_shard(envs: list[gymnasium.Env], actions: np.ndarray, batcher: _Batche
     return np.stack(obs), rewards, terminated, truncated, infos
 
 
+class _Shard:
+    """A slice of envs and the commands the vector env sends it; runs in a worker process or,
+    for the last slice, in the main process itself (`_InProcess`)."""
+
+    def __init__(self, env_fns: Sequence[EnvFn]):
+        self.envs = [fn() for fn in env_fns]
+        self.batcher = _Batcher(len(self.envs))
+
+    def handle(self, command: str, payload: Any) -> tuple[str, Any]:
+        """The reply to one command."""
+        envs = self.envs
+        if command == "step":
+            return "ok", _step_shard(envs, payload, self.batcher)
+        if command == "reset":
+            infos: dict[str, Any] = {}
+            obs = []
+            for i, (env, seed) in enumerate(zip(envs, payload["seeds"])):
+                o, info = env.reset(seed=seed, options=payload["options"])
+                infos = self.batcher._add_info(infos, info, i)
+                obs.append(o)
+            return "ok", (np.stack(obs), infos)
+        if command == "set_attr":
+            name, values = payload
+            for env, value in zip(envs, values):
+                setattr(env.unwrapped, name, value)
+            return "ok", None
+        if command == "get_attr":
+            return "ok", [getattr(env.unwrapped, payload) for env in envs]
+        if command == "close":
+            for env in envs:
+                env.close()
+            return "ok", None
+        raise ValueError(f"unknown command {command!r}")
+
+    def run(self, command: str, payload: Any) -> tuple[str, Any]:
+        """`handle`, with a failure turned into an error reply (raised in the main process)."""
+        try:
+            return self.handle(command, payload)
+        except Exception:
+            return "error", traceback.format_exc()
+
+
 def _worker(pipe, env_fns: list[EnvFn]) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    envs = [fn() for fn in env_fns]
-    batcher = _Batcher(len(envs))
+    shard = _Shard(env_fns)
     while True:
         command, payload = pipe.recv()
-        try:
-            if command == "step":
-                pipe.send(("ok", _step_shard(envs, payload, batcher)))
-            elif command == "reset":
-                infos: dict[str, Any] = {}
-                obs = []
-                for i, (env, seed) in enumerate(zip(envs, payload["seeds"])):
-                    o, info = env.reset(seed=seed, options=payload["options"])
-                    infos = batcher._add_info(infos, info, i)
-                    obs.append(o)
-                pipe.send(("ok", (np.stack(obs), infos)))
-            elif command == "set_attr":  # no reply (see module doc); a failure is the next reply
-                name, values = payload
-                for env, value in zip(envs, values):
-                    setattr(env.unwrapped, name, value)
-            elif command == "get_attr":
-                pipe.send(("ok", [getattr(env.unwrapped, payload) for env in envs]))
-            elif command == "close":
-                for env in envs:
-                    env.close()
-                pipe.send(("ok", None))
-                return
-            else:
-                raise ValueError(f"unknown command {command!r}")
-        except Exception:  # report to the main process, which raises it there
-            pipe.send(("error", traceback.format_exc()))
+        pipe.send(shard.run(command, payload))
+        if command == "close":
+            return
+
+
+class _InProcess:
+    """The last slice of envs, stepped by the main process itself, behind the same send/recv
+    interface as a worker's pipe. The main process only waits while the workers step; giving it
+    a slice of its own replaces one worker's process wake-ups and pipe round trip per step, which
+    on this 2-core VM cost more than the stepping (benchmarks/env_speed.py: 2 worker processes
+    ran 8 envs *slower* than one process alone). Commands run when sent, so the vector env sends
+    to the workers first."""
+
+    def __init__(self, env_fns: Sequence[EnvFn]):
+        self.shard = _Shard(env_fns)
+        self.replies: deque[tuple[str, Any]] = deque()
+
+    def send(self, message: tuple[str, Any]) -> None:
+        self.replies.append(self.shard.run(*message))
+
+    def recv(self) -> tuple[str, Any]:
+        return self.replies.popleft()
+
+    def close(self) -> None:
+        pass
 
 
 def _merge_infos(shards: list[dict[str, Any]], sizes: list[int]) -> dict[str, Any]:
@@ -110,11 +153,12 @@ def _blank(like: np.ndarray, n: int) -> np.ndarray:
 
 
 class ShardedVectorEnv(VectorEnv):
-    """`len(env_fns)` envs spread over `num_workers` processes, SAME_STEP autoreset."""
+    """`len(env_fns)` envs in `num_shards` slices (the last in this process, the others in one
+    worker process each), SAME_STEP autoreset."""
 
-    def __init__(self, env_fns: Sequence[EnvFn], num_workers: int):
+    def __init__(self, env_fns: Sequence[EnvFn], num_shards: int):
         self.num_envs = len(env_fns)
-        num_workers = max(1, min(num_workers, self.num_envs))
+        num_shards = max(1, min(num_shards, self.num_envs))
         probe = env_fns[0]()
         self.single_observation_space = probe.observation_space
         self.single_action_space = probe.action_space
@@ -123,71 +167,55 @@ class ShardedVectorEnv(VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
 
-        bounds = np.linspace(0, self.num_envs, num_workers + 1).astype(int)
+        bounds = np.linspace(0, self.num_envs, num_shards + 1).astype(int)
         self.shards = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
-        """The envs of each worker, in order."""
-        self._in_flight: set[int] = set()
+        """The envs of each slice, in order; the last one is stepped in this process."""
         ctx = mp.get_context()
-        self._pipes, self._procs = [], []
-        for sl in self.shards:
+        self._pipes: list[Any] = []
+        self._procs = []
+        for sl in self.shards[:-1]:  # the workers first: forked before this process builds envs
             parent, child = ctx.Pipe()
             proc = ctx.Process(target=_worker, args=(child, list(env_fns[sl])), daemon=True)
             proc.start()
             child.close()
             self._pipes.append(parent)
             self._procs.append(proc)
+        self._pipes.append(_InProcess(env_fns[self.shards[-1]]))
         self.closed = False
 
     def _all(self, messages: Sequence[tuple[str, Any]]) -> list[Any]:
-        if self._in_flight:
-            raise RuntimeError(f"workers {sorted(self._in_flight)} are still stepping: recv_step them first")
+        """Send each slice its message (the workers first: the main process's own slice runs
+        when sent), then collect the replies in order."""
         for pipe, message in zip(self._pipes, messages):
             pipe.send(message)
-        return [self._reply(k) for k in range(len(self._pipes))]
-
-    def _reply(self, k: int) -> Any:
-        status, value = self._pipes[k].recv()
-        if status == "error":
-            raise RuntimeError(f"a vector-env worker failed:\n{value}")
-        return value
-
-    def send_step(self, k: int, actions: np.ndarray) -> None:
-        """Start stepping worker k's envs (`shards[k]`) with `actions` (one row per env)."""
-        if k in self._in_flight:
-            raise RuntimeError(f"worker {k} is still stepping: recv_step({k}) first")
-        self._pipes[k].send(("step", actions))
-        self._in_flight.add(k)
-
-    def recv_step(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
-        """Worker k's step results, as a vector env of its envs alone would return them."""
-        if k not in self._in_flight:
-            raise RuntimeError(f"worker {k} is not stepping: send_step({k}, ...) first")
-        self._in_flight.discard(k)
-        return self._reply(k)
-
-    def merge_infos(self, shards: Sequence[dict[str, Any]]) -> dict[str, Any]:
-        """The workers' batched infos (one per worker, in order) as one vector env's: each array
-        the concatenation of the workers' rows, a worker without a key contributing blank rows
-        (mask false), as gymnasium's `_add_info` would have left them."""
-        return _merge_infos(list(shards), [sl.stop - sl.start for sl in self.shards])
+        replies = []
+        for pipe in self._pipes:
+            status, value = pipe.recv()
+            if status == "error":
+                raise RuntimeError(f"a vector-env worker failed:\n{value}")
+            replies.append(value)
+        return replies
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         seeds = [None if seed is None else seed + i for i in range(self.num_envs)]
         replies = self._all([("reset", {"seeds": seeds[sl], "options": options}) for sl in self.shards])
-        return np.concatenate([obs for obs, _ in replies]), self.merge_infos([infos for _, infos in replies])
+        return np.concatenate([obs for obs, _ in replies]), self._merge([infos for _, infos in replies])
 
     def step(self, actions: np.ndarray):
-        for k, sl in enumerate(self.shards):
-            self.send_step(k, actions[sl])
-        obs, rewards, terminated, truncated, infos = zip(*(self.recv_step(k) for k in range(len(self.shards))))
-        return np.concatenate(obs), np.concatenate(rewards), np.concatenate(terminated), np.concatenate(truncated), self.merge_infos(infos)
+        replies = self._all([("step", actions[sl]) for sl in self.shards])
+        obs, rewards, terminated, truncated, infos = zip(*replies)
+        return np.concatenate(obs), np.concatenate(rewards), np.concatenate(terminated), np.concatenate(truncated), self._merge(infos)
+
+    def _merge(self, shards: Sequence[dict[str, Any]]) -> dict[str, Any]:
+        """The slices' batched infos as one vector env's: each array the concatenation of the
+        slices' rows, a slice without a key contributing blank rows (mask false), as gymnasium's
+        `_add_info` would have left them."""
+        return _merge_infos(list(shards), [sl.stop - sl.start for sl in self.shards])
 
     def set_attr(self, name: str, values: Any) -> None:
-        """Sent without waiting for a reply: allowed while workers step (module doc)."""
         if not isinstance(values, (list, tuple)):
             values = [values] * self.num_envs
-        for pipe, sl in zip(self._pipes, self.shards):
-            pipe.send(("set_attr", (name, list(values[sl]))))
+        self._all([("set_attr", (name, list(values[sl]))) for sl in self.shards])
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
         return tuple(v for shard in self._all([("get_attr", name)] * len(self._pipes)) for v in shard)
@@ -196,8 +224,6 @@ class ShardedVectorEnv(VectorEnv):
         if self.closed:
             return
         try:
-            for k in sorted(self._in_flight):  # a collection interrupted mid-step: take its results
-                self.recv_step(k)
             self._all([("close", None)] * len(self._pipes))
         except (BrokenPipeError, EOFError, RuntimeError):
             pass

@@ -86,18 +86,16 @@ class RL2Spec(StrictModel):
 
 class RuntimeSpec(StrictModel):
     vector: Literal["sharded", "async", "sync"] = "sharded"
-    """`sharded`: `workers` processes each stepping a slice of the envs (one round trip per core
-    per step); `async`: one process per env (gymnasium AsyncVectorEnv); `sync`: all in-process."""
+    """`sharded`: the envs in `workers` slices, the last stepped by the main process and each
+    other by a worker process (one round trip per worker per step); `async`: one process per env
+    (gymnasium AsyncVectorEnv); `sync`: all in-process."""
     workers: int | None = Field(default=None, ge=1, le=1024)
-    """Worker processes for `sharded`; default one per CPU core."""
+    """Slices of envs for `sharded` (`workers - 1` worker processes plus the main process);
+    default one per CPU core."""
     torch_threads: int = Field(default=1, ge=1, le=256)
     """Torch threads while collecting: one, so the env workers keep the other cores."""
     update_threads: int | None = Field(default=None, ge=1, le=256)
     """Torch threads during the PPO update; default every core (the workers wait meanwhile)."""
-    overlap: bool = False
-    """`sharded` with 2+ workers and an MLP policy: choose each worker's next actions as soon as
-    its own step is back, while the other workers step (a double-buffered collector), instead of
-    stepping all workers in lockstep."""
 
 
 class AgentSpec(StrictModel):
