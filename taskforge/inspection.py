@@ -19,7 +19,7 @@ import mujoco
 
 from taskforge.demos import scripted_policy
 from taskforge.envs import TaskEnv
-from taskforge.terms import REWARD_TERMS, SCALAR_FEATURES
+from taskforge.terms import SCALAR_FEATURES
 
 NAME_KINDS = {
     "bodies": mujoco.mjtObj.mjOBJ_BODY,
@@ -79,7 +79,7 @@ def scripted_trace(env: TaskEnv, stage: str, seed: int = 0, goal_index: int = 0)
     """Run the stage's scripted policy (as `taskforge demos` would) for one episode."""
     policy = scripted_policy(env, stage)
     compiled = env.stages[stage]
-    features = sorted({c.feature for c in compiled.spec.success.all} | _read_features(compiled)) or sorted(
+    features = sorted(compiled.reads & SCALAR_FEATURES) or sorted(
         SCALAR_FEATURES & set(env.features()))
     weights = {t.key: t.weight for t in compiled.terms}
     columns = ["step", *features, *(f"reward/{k}" for k in weights), "reward", "success"]
@@ -100,8 +100,3 @@ def scripted_trace(env: TaskEnv, stage: str, seed: int = 0, goal_index: int = 0)
         rows.append(row(step, reward, info))
         done = terminated or truncated
     return Trace(policy.name, columns, rows)
-
-
-def _read_features(compiled) -> set[str]:
-    """Scalar features the stage's reward terms read (from the term registry's `reads`)."""
-    return {f for spec in compiled.spec.rewards for f in REWARD_TERMS[spec.term].reads if f in SCALAR_FEATURES}
