@@ -7,17 +7,17 @@ the main process (which runs the policy) is starved while it sends actions. Here
 slices (default: one per core) each step their envs in a loop, so a vector step costs one round
 trip per worker process, and none for the main process's own slice (`_InProcess`: on this VM a
 process wake-up and round trip cost more than the 4 envs a worker steps; 8 taskforge envs ran at
-~3,100 steps/s over 2 worker processes, ~4,700 over 1 worker + the main process). Each worker also batches its own slice (observations stacked, infos
-merged with gymnasium's own `_add_info`), in parallel, and the main process only concatenates one
-batch per worker: per-env info merging in the main process was ~0.3 ms of every vector step, time
-in which every worker waits (benchmarks/env_speed.py). Semantics match gymnasium's SAME_STEP
+~3,100 steps/s over 2 worker processes, ~4,700 over 1 worker + the main process). Each worker
+also batches its own slice (observations stacked, infos merged with gymnasium's own `_add_info`),
+in parallel, and the main process only concatenates one batch per slice (benchmarks/env_speed.py). Semantics match gymnasium's SAME_STEP
 autoreset exactly (the same `final_obs` / `final_info` layout; tested against SyncVectorEnv).
 
 A double-buffered collector (PPO sampling one slice's next actions while the other slices step)
 was built and measured here, and removed: with the main process stepping a slice itself it
 collected ~15 % slower than lockstep (ARCHITECTURE.md, "Vector env").
 
-Workers ignore SIGINT: on Ctrl-C the main process saves its checkpoint and closes them.
+Workers ignore SIGINT: on Ctrl-C the main process (interrupted in its own slice's step or while
+waiting) saves its last complete checkpoint and closes them.
 """
 
 from __future__ import annotations
