@@ -9,8 +9,9 @@ trip per worker process, and none for the main process's own slice (`_InProcess`
 process wake-up and round trip cost more than the 4 envs a worker steps; 8 taskforge envs ran at
 ~3,100 steps/s over 2 worker processes, ~4,700 over 1 worker + the main process). Each worker
 also batches its own slice (observations stacked, infos merged with gymnasium's own `_add_info`),
-in parallel, and the main process only concatenates one batch per slice (benchmarks/env_speed.py). Semantics match gymnasium's SAME_STEP
-autoreset exactly (the same `final_obs` / `final_info` layout; tested against SyncVectorEnv).
+in parallel, and the main process only concatenates one batch per slice (benchmarks/env_speed.py).
+Semantics match gymnasium's SAME_STEP autoreset exactly (the same `final_obs` / `final_info`
+layout; tested against SyncVectorEnv).
 
 A double-buffered collector (PPO sampling one slice's next actions while the other slices step)
 was built and measured here, and removed: with the main process stepping a slice itself it
@@ -46,19 +47,6 @@ class _Batcher:
         self.num_envs = num_envs
 
 
-def _step_shard(envs: list[gymnasium.Env], actions: np.ndarray, batcher: _Batcher):
-    """Step a worker's envs, SAME_STEP autoreset, and batch the results as a vector env would."""
-    obs, rewards, terminated, truncated, infos = [], np.zeros(len(envs)), np.zeros(len(envs), bool), np.zeros(len(envs), bool), {}
-    for i, (env, action) in enumerate(zip(envs, actions)):
-        o, rewards[i], terminated[i], truncated[i], info = env.step(action)
-        if terminated[i] or truncated[i]:  # SAME_STEP autoreset
-            infos = batcher._add_info(infos, {"final_obs": o, "final_info": info}, i)
-            o, info = env.reset()
-        infos = batcher._add_info(infos, info, i)
-        obs.append(o)
-    return np.stack(obs), rewards, terminated, truncated, infos
-
-
 class _Shard:
     """A slice of envs and the commands the vector env sends it; runs in a worker process or,
     for the last slice, in the main process itself (`_InProcess`)."""
@@ -67,11 +55,24 @@ class _Shard:
         self.envs = [fn() for fn in env_fns]
         self.batcher = _Batcher(len(self.envs))
 
+    def step(self, actions: np.ndarray):
+        """Step the envs, SAME_STEP autoreset, and batch the results as a vector env would."""
+        n = len(self.envs)
+        obs, rewards, terminated, truncated, infos = [], np.zeros(n), np.zeros(n, bool), np.zeros(n, bool), {}
+        for i, (env, action) in enumerate(zip(self.envs, actions)):
+            o, rewards[i], terminated[i], truncated[i], info = env.step(action)
+            if terminated[i] or truncated[i]:  # SAME_STEP autoreset
+                infos = self.batcher._add_info(infos, {"final_obs": o, "final_info": info}, i)
+                o, info = env.reset()
+            infos = self.batcher._add_info(infos, info, i)
+            obs.append(o)
+        return np.stack(obs), rewards, terminated, truncated, infos
+
     def handle(self, command: str, payload: Any) -> tuple[str, Any]:
         """The reply to one command."""
         envs = self.envs
         if command == "step":
-            return "ok", _step_shard(envs, payload, self.batcher)
+            return "ok", self.step(payload)
         if command == "reset":
             infos: dict[str, Any] = {}
             obs = []
@@ -128,9 +129,6 @@ class _InProcess:
 
     def recv(self) -> tuple[str, Any]:
         return self.replies.popleft()
-
-    def close(self) -> None:
-        pass
 
 
 def _merge_infos(shards: list[dict[str, Any]], sizes: list[int]) -> dict[str, Any]:
