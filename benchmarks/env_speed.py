@@ -31,53 +31,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium
-import mujoco
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import taskforge  # noqa: E402
 from benchmarks.common import print_table, versions, write_result  # noqa: E402
+from benchmarks.pick_place_envs import ENV_NAME, MetaWorldEnv, taskforge_env  # noqa: E402
 from taskforge.agents.sharded import ShardedVectorEnv  # noqa: E402
 from taskforge.backends.metaworld import ml1_goals  # noqa: E402
-
-ROOT = Path(__file__).resolve().parents[1]
-TASK = ROOT / "tasks/metaworld/pick_place.yaml"
-ENV_NAME = "pick-place-v3"
-
-
-class MetaWorldEnv(gymnasium.Env):
-    """Meta-World's own pick-place-v3 on a random ML1 train goal per episode (500 steps), as a
-    gymnasium env the vector env can hold."""
-
-    def __init__(self, physics_only: bool = False):
-        from metaworld.env_dict import ALL_V3_ENVIRONMENTS
-
-        self.env = ALL_V3_ENVIRONMENTS[ENV_NAME]()
-        self.physics_only = physics_only
-        """Step only `mj_step` x frame_skip (the physics ceiling), no observation or reward."""
-        self.observation_space, self.action_space = self.env.observation_space, self.env.action_space
-        self._train = ml1_goals(ENV_NAME, 0)[0]
-        self._rng = np.random.default_rng(0)
-
-    def reset(self, *, seed=None, options=None):
-        if seed is not None:
-            self._rng = np.random.default_rng(seed)
-        self.env.set_task(self._train[int(self._rng.integers(len(self._train)))])
-        return self.env.reset()
-
-    def step(self, action):
-        if self.physics_only:
-            env = self.env
-            env.data.ctrl[:] = (action[-1], -action[-1])
-            mujoco.mj_step(env.model, env.data, env.frame_skip)
-            return np.zeros(39), 0.0, False, False, {}
-        return self.env.step(action)
-
-
-def taskforge_env(seed: int = 0) -> gymnasium.Env:
-    return taskforge.make(TASK, stage="place", seed=seed)
-
 
 ROWS: dict[str, Callable[[], gymnasium.Env]] = {
     "Meta-World's own step": MetaWorldEnv,

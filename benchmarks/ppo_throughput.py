@@ -31,39 +31,15 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, versions, write_result  # noqa: E402
+from benchmarks.pick_place_envs import MetaWorldEnv, taskforge_env  # noqa: E402
 from taskforge.agents import PPOAgent, make_vector_env  # noqa: E402
-from taskforge.envs import TaskEnv, load_task  # noqa: E402
 from taskforge.spec import load_agent_spec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-TASK = ROOT / "tasks/metaworld/pick_place.yaml"
-
-
-def task_env(seed: int = 0) -> TaskEnv:
-    env = TaskEnv(load_task(TASK), TASK, stage="place", seed=seed)
-    return env
-
-
-def raw_env():
-    from metaworld.env_dict import ALL_V3_ENVIRONMENTS
-
-    from taskforge.backends.metaworld import ml1_goals
-
-    class Raw(ALL_V3_ENVIRONMENTS["pick-place-v3"]):
-        """Bare Meta-World with a random ML1 goal per episode, as gymnasium's vector env needs
-        (reset must accept seed/options)."""
-
-        def reset(self, *, seed=None, options=None):
-            train, _ = ml1_goals("pick-place-v3", 0)
-            rng = np.random.default_rng(seed)
-            self.set_task(train[int(rng.integers(len(train)))])
-            return super().reset()
-
-    return Raw()
 
 
 def time_taskforge(spec, updates: int) -> float:
-    envs = make_vector_env([partial(task_env, i) for i in range(spec.ppo.num_envs)], spec.runtime)
+    envs = make_vector_env([partial(taskforge_env, i) for i in range(spec.ppo.num_envs)], spec.runtime)
     agent = PPOAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
     agent.collect(envs)
     agent.update()  # warm-up
@@ -125,11 +101,11 @@ def main() -> None:
     torch.set_num_threads(spec.runtime.torch_threads)
 
     results = {
-        "taskforge env alone": time_env(spec, args.updates, task_env),
-        "Meta-World's own env alone": time_env(spec, args.updates, raw_env),
+        "taskforge env alone": time_env(spec, args.updates, taskforge_env),
+        "Meta-World's own env alone": time_env(spec, args.updates, MetaWorldEnv),
         "taskforge PPO": time_taskforge(spec, args.updates),
-        "SB3 PPO on the taskforge env": time_sb3(spec, args.updates, task_env),
-        "SB3 PPO on Meta-World's own env": time_sb3(spec, args.updates, raw_env),
+        "SB3 PPO on the taskforge env": time_sb3(spec, args.updates, taskforge_env),
+        "SB3 PPO on Meta-World's own env": time_sb3(spec, args.updates, MetaWorldEnv),
     }
     env_alone, sb3 = results["taskforge env alone"], results["SB3 PPO on the taskforge env"]
     best = results["taskforge PPO"]
