@@ -178,7 +178,7 @@ def test_a_curriculum_with_warm_start_validates(tmp_path, capsys):
         ({"generate_episodes": 0}, "warm_start.generate_episodes", "greater than or equal to 1"),
         ({"generate_episodes": 5, "stage": "hardest"}, "warm_start.stage", "no stage 'hardest'"),
         ({"generate_episodes": 5, "phase": 3}, "warm_start.phase", "no phase 3"),
-        ({"generate_episodes": 5, "phase": -1}, "warm_start.phase", "counts from 0"),
+        ({"generate_episodes": 5, "phase": -1}, "warm_start.phase", "counting from 0, or 'all'; got -1"),
         ({"generate_episodes": 5, "phase": "every"}, "warm_start.phase", "'all'"),
         ({"generate_episodes": 5, "regularizer": {"wieght": 1.0}}, "warm_start.regularizer.wieght", "did you mean 'weight'"),
         ({"generate_episodes": 5, "regularizer": {"decay": 1.5}}, "warm_start.regularizer.decay", "less than or equal to 1"),

@@ -159,12 +159,13 @@ class WarmStartSpec(StrictModel):
     """Which stage of that task; default the phase's last stage. With `phase: all` it must exist
     in every phase. With `demos`, checked against the stage the file was recorded on."""
 
-    @field_validator("phase")
+    @field_validator("phase", mode="before")
     @classmethod
-    def _phase_index(cls, phase: int | str) -> int | str:
-        if isinstance(phase, int) and phase < 0:
-            raise ValueError(f"a phase index counts from 0 (got {phase}); or 'all'")
-        return phase
+    def _phase_index(cls, phase: object) -> object:
+        """One clear line for a bad value (the union's own errors would give one per member)."""
+        if phase == "all" or (isinstance(phase, int) and not isinstance(phase, bool) and phase >= 0):
+            return phase
+        raise ValueError(f"expected a phase index counting from 0, or 'all'; got {phase!r}")
     bc_epochs: int = Field(default=50, ge=0)
     bc_batch_size: int = Field(default=256, ge=1)
     bc_learning_rate: float = Field(default=1e-3, gt=0.0)

@@ -163,7 +163,8 @@ def _demonstrations(
             )
         parts.append(part)
     demos = demo_io.concatenate(parts)
-    _say(progress, "warm start: scripted success on the train goals: " + _success_by_task(demos.metadata))
+    # a result, not progress: printed with --no-progress too (and logged as demo_success/<task>)
+    print("warm start: scripted success on the train goals: " + _success_by_task(demos.metadata), file=sys.stderr)
     return demos, True
 
 
