@@ -116,8 +116,12 @@ def cmd_train(args: argparse.Namespace) -> int:
         if run.final_eval.is_file():
             ev = json.loads(run.final_eval.read_text())
             low, high = ev["success_ci95"]
-            print(f"held-out success of '{ev['stage']}' ({ev['split']} split, {ev['episodes']} episodes): "
+            tasks = ev.get("tasks", [])
+            over = f", {len(tasks)} tasks" if tasks else ""
+            print(f"held-out success of '{ev['stage']}' ({ev['split']} split, {ev['episodes']} episodes{over}): "
                   f"{ev['success_rate']:.2f} (95 % CI {low:.2f}-{high:.2f})")
+            for row in tasks:
+                print(f"  {row['task']}: {row['success_rate']:.2f} ({row['successes']}/{row['episodes']})")
     else:
         print(f"paused at step {step:,} of {total:,}: {run} (continue with --resume)")
     return 0

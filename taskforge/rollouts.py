@@ -94,6 +94,25 @@ class StageResult:
         }
 
 
+def summarize(results: list[StageResult]) -> dict:
+    """One result as its `as_dict()`; several (one per task) as their pooled success over every
+    episode (the mean over tasks when each ran as many) with the rows under `tasks`."""
+    if len(results) == 1:
+        return results[0].as_dict()
+    rows = [r.as_dict() for r in results]
+    successes = np.concatenate([np.ravel(np.asarray(r.successes, dtype=bool)) for r in results])
+    return {
+        "task": "all",
+        "stage": ", ".join(dict.fromkeys(r.stage for r in results)),
+        "split": results[0].split,
+        "episodes": int(successes.size),
+        "successes": int(successes.sum()),
+        **_rate(successes),
+        "mean_return": float(np.mean([r.mean_return for r in results])),
+        "tasks": rows,
+    }
+
+
 def evaluate(
     agent: PPOAgent,
     task: TaskSpec,

@@ -100,12 +100,13 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
         lines.append(f"  phase {i + 1}: {phase.task.name} ({phase.task_file}): {' -> '.join(phase.stages)}")
     lines.append(
         f"  evaluate every {spec.evaluation.every_steps:,} steps on {spec.evaluation.episodes} "
-        f"{spec.evaluation.split} {'trials' if cur.agent.algo == 'rl2' else 'episodes'}; checkpoint every {spec.checkpoint.every_steps:,} steps"
+        f"{spec.evaluation.split} {'trials' if cur.agent.algo == 'rl2' else 'episodes'}"
+        f"{' of every task of every phase' if spec.evaluation.tasks == 'all' else ''}; checkpoint every {spec.checkpoint.every_steps:,} steps"
     )
     ws = spec.warm_start
     if ws is not None:
-        phase = cur.phases[ws.phase]
-        source = str(cur.demos_file) if ws.demos else f"{ws.generate_episodes} scripted episodes of {phase.task.name}:{ws.stage or phase.stages[-1]}"
+        tasks = " + ".join(f"{p.task.name}:{ws.stage or p.stages[-1]}" for p in cur.warm_start_phases())
+        source = str(cur.demos_file) if ws.demos else f"{ws.generate_episodes} scripted episodes of {tasks}"
         ft = ws.fine_tune
         std = ft.exploration_std if isinstance(ft.exploration_std, str) else f"{ft.exploration_std:g}"
         lines.append(

@@ -204,6 +204,29 @@ def test_replay_fraction_is_respected_and_uniform_over_passed_stages():
     assert all(a.stage == "c" for a in assignments if not a.replay)
 
 
+def test_replay_reaches_back_into_earlier_phases():
+    """In a later phase (e.g. a harder robot variant) replay also plays every stage of the earlier
+    phases, so what the agent learnt there is not forgotten; the first position has none."""
+    scheduler = make_scheduler([["a"], ["b"], ["c", "d"]], replay={"fraction": 0.5}, **RULE)
+    assert not any(scheduler.assign().replay for _ in range(200))
+    feed(scheduler, [True] * 10)
+    assert (scheduler.phase, scheduler.stage) == (1, "b")
+    replayed = [a for a in (scheduler.assign() for _ in range(400)) if a.replay]
+    assert {(a.phase, a.stage) for a in replayed} == {(0, "a")}
+
+    feed(scheduler, [True] * 20)
+    assert (scheduler.phase, scheduler.stage) == (2, "d")
+    assignments = [scheduler.assign() for _ in range(6000)]
+    replayed = [a for a in assignments if a.replay]
+    positions = [(a.phase, a.stage) for a in replayed]
+    assert set(positions) == {(0, "a"), (1, "b"), (2, "c")}
+    assert all(positions.count(p) / len(positions) == pytest.approx(1 / 3, abs=0.04) for p in set(positions))
+    assert all((a.phase, a.stage) == (2, "d") for a in assignments if not a.replay)
+    # replayed episodes of an earlier phase count in its statistics, never for the current stage
+    assert scheduler.record(replayed[0], False, 10) == []
+    assert scheduler.stage == "d"
+
+
 def test_replayed_episodes_never_promote():
     scheduler = make_scheduler([["a", "b", "c"]], replay={"fraction": 0.5}, **RULE)
     feed(scheduler, [True] * 10)
@@ -335,7 +358,7 @@ def full_scheduler(seed: int) -> CurriculumScheduler:
 
 # Probability of success per stage (plus a bonus per sub-task), so the stream depends on what was
 # assigned. "refine" is hard: it is demoted several times before it finishes after ~200 episodes.
-SKILL = {"reach": 0.9, "push": 0.8, "solve": 0.75, "refine": 0.3}
+SKILL = {"reach": 0.9, "push": 0.8, "solve": 0.75, "refine": 0.2}
 NOISE = np.random.default_rng(1234).random(4000)
 
 

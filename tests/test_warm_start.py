@@ -178,6 +178,8 @@ def test_a_curriculum_with_warm_start_validates(tmp_path, capsys):
         ({"generate_episodes": 0}, "warm_start.generate_episodes", "greater than or equal to 1"),
         ({"generate_episodes": 5, "stage": "hardest"}, "warm_start.stage", "no stage 'hardest'"),
         ({"generate_episodes": 5, "phase": 3}, "warm_start.phase", "no phase 3"),
+        ({"generate_episodes": 5, "phase": -1}, "warm_start.phase", "counting from 0, or 'all'; got -1"),
+        ({"generate_episodes": 5, "phase": "every"}, "warm_start.phase", "'all'"),
         ({"generate_episodes": 5, "regularizer": {"wieght": 1.0}}, "warm_start.regularizer.wieght", "did you mean 'weight'"),
         ({"generate_episodes": 5, "regularizer": {"decay": 1.5}}, "warm_start.regularizer.decay", "less than or equal to 1"),
         ({"generate_episode": 5}, "warm_start.generate_episode", "did you mean 'generate_episodes'"),
@@ -266,3 +268,34 @@ def test_training_generates_metaworld_demos_and_keeps_them_for_resume(tmp_path):
     first = read_jsonl(run / "metrics.jsonl")[0]
     assert meta["steps_run"] == 2 * 150  # both reach episodes ran to the stage's time limit
     assert first["step"] == meta["steps_run"] and first["bc_demo_episodes"] == meta["episodes_kept"]
+
+
+def test_warm_start_and_evaluation_over_every_phase(tmp_path, capsys):
+    """`warm_start.phase: all` records the demos over every phase's task (episodes split evenly) and
+    `evaluation.tasks: all` evaluates every phase's task: one row per task in the log and at the end."""
+    agent = {"name": "tiny", "policy": {"hidden_sizes": [32, 32]},
+             "ppo": {"num_envs": 2, "rollout_steps": 50, "num_minibatches": 1, "update_epochs": 1},
+             "runtime": {"vector": "sync", "update_threads": 1}}
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
+    push = PICK_PLACE.parent / "push.yaml"
+    doc = {"name": "two-tasks", "agent": "agent.yaml", "total_steps": 100,
+           "phases": [{"task": str(PICK_PLACE), "stages": ["reach"]}, {"task": str(push), "stages": ["reach"]}],
+           "evaluation": {"every_steps": 10_000, "episodes": 1, "tasks": "all", "stop_on_success": True},
+           "warm_start": {"generate_episodes": 3, "phase": "all", "bc_epochs": 2, "dagger": {"rounds": 1, "steps_per_round": 100}}}
+    cur = tmp_path / "c.yaml"
+    cur.write_text(yaml.safe_dump(doc))
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run"), "--no-progress"]) == 0
+    out = capsys.readouterr()
+    assert "scripted success on the train goals: metaworld-pick-place" in out.err
+
+    with np.load(tmp_path / "run" / "demos.npz") as data:
+        meta = json.loads(str(data["metadata"]))
+    assert [(p["task"], p["episodes_run"]) for p in meta["parts"]] == [("metaworld-pick-place", 2), ("metaworld-push", 1)]
+    assert meta["stage"] == "reach" and meta["steps_run"] == 3 * 150
+    first = read_jsonl(tmp_path / "run" / "metrics.jsonl")[0]
+    assert first["step"] == 3 * 150 + 100  # demos and DAgger's student steps (both phases' envs)
+    assert {"eval/metaworld-pick-place", "eval/metaworld-push", "demo_success/metaworld-push"} <= set(first)
+    final = json.loads((tmp_path / "run" / "final_eval.json").read_text())
+    assert [(row["task"], row["stage"], row["episodes"]) for row in final["tasks"]] == [
+        ("metaworld-pick-place", "reach", 1), ("metaworld-push", "reach", 1)]
+    assert final["episodes"] == 2 and "2 tasks" in out.out and "  metaworld-push: " in out.out

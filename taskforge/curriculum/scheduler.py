@@ -18,9 +18,10 @@ Semantics (the trainer relies on these):
   a phase boundary. Promotion is checked before demotion.
 - Entering a stage (by promotion or demotion) clears its promotion and demotion windows and its
   step count, so every decision is based only on episodes played since then.
-- Replay: with probability `replay.fraction`, an assignment picks one of the already-passed stages
-  of the current phase (uniformly) instead of the current stage. There is no replay in a phase's
-  first stage.
+- Replay: with probability `replay.fraction`, an assignment picks one of the positions already
+  passed (uniformly: every stage of the earlier phases, then the current phase's earlier stages)
+  instead of the current one, so neither an earlier stage nor an earlier phase's task (e.g. a
+  robot variant) is forgotten. There is no replay at the very first position.
 - Only current-stage episodes decide. Replayed episodes (`replay=True`) and stale ones count only
   in statistics: `success_rates()` and the sub-task learning-progress EMAs. A stale episode was
   assigned a stage or phase that is no longer current, e.g. by a worker that started it before a
@@ -158,6 +159,10 @@ class CurriculumScheduler:
     def finished(self) -> bool:
         return self._finished
 
+    def task_names(self, phase: int) -> list[str]:
+        """The sub-tasks of a phase's task (one name for a single task)."""
+        return list(self._tasks[phase])
+
     @property
     def events(self) -> list[CurriculumEvent]:
         """Every promotion, demotion and the finish so far, oldest first (a copy)."""
@@ -172,14 +177,20 @@ class CurriculumScheduler:
     # --- assigning episodes ---------------------------------------------------------------------
 
     def assign(self) -> Assignment:
-        """The stage and sub-task the next episode of a worker should run."""
-        stage = self._stage
+        """The phase, stage and sub-task the next episode of a worker should run."""
+        phase, stage = self._phase, self._stage
+        passed = self._passed()
         fraction = self._spec.replay.fraction
-        replay = stage > 0 and fraction > 0.0 and bool(self._rng.random() < fraction)
+        replay = bool(passed) and fraction > 0.0 and bool(self._rng.random() < fraction)
         if replay:
-            stage = int(self._rng.integers(stage))  # one of the passed stages 0 .. current-1
-        task = self._pick_task(self._phase, stage)
-        return Assignment(self._phase, self._stages[self._phase][stage], self._tasks[self._phase][task], replay)
+            phase, stage = passed[int(self._rng.integers(len(passed)))]
+        task = self._pick_task(phase, stage)
+        return Assignment(phase, self._stages[phase][stage], self._tasks[phase][task], replay)
+
+    def _passed(self) -> list[tuple[int, int]]:
+        """The (phase, stage) positions behind the current one, in curriculum order."""
+        earlier = [(p, s) for p in range(self._phase) for s in range(len(self._stages[p]))]
+        return earlier + [(self._phase, s) for s in range(self._stage)]
 
     def _pick_task(self, phase: int, stage: int) -> int:
         count = len(self._tasks[phase])

@@ -3,7 +3,7 @@ the `.npz` files `taskforge demos` writes and a curriculum's `warm_start` reads.
 
 Imports spec, backends and envs only (never agents or training)."""
 
-from taskforge.demos.dataset import Demos, generate, load, record, save
+from taskforge.demos.dataset import Demos, concatenate, generate, load, record, save
 from taskforge.demos.policies import (
     BEHAVIOURS,
     MetaWorldPolicy,
@@ -18,6 +18,7 @@ from taskforge.demos.policies import (
 __all__ = [
     "BEHAVIOURS",
     "Demos",
+    "concatenate",
     "MetaWorldPolicy",
     "PlannerConfig",
     "ScriptedPolicy",

@@ -93,11 +93,15 @@ def record(
     steps: dict[str, list] = {k: [] for k in (*STEP_KEYS, "privileged")}
     kept: dict[str, list] = {k: [] for k in EPISODE_KEYS}
     successes = 0
+    by_task: dict[str, list[bool]] = {}
     steps_run = 0  # failed episodes included: every step the expert took costs env time
+    # a task set's sub-tasks in turn (MT10: every task as often), unless the env is pinned to one
+    rotation = list(env.backend.task_names) if env.task_name is None and len(env.backend.task_names) > 1 else []
     bar = _progress_bar(episodes, f"{env.task.name}:{stage}", progress)
     for k in range(episodes):
         goal_index = (seed + k) % num_goals
-        obs, info = env.reset(seed=seed + k, options={"stage": stage, "goal_index": goal_index})
+        options = {"stage": stage, "goal_index": goal_index, **({"task": rotation[k % len(rotation)]} if rotation else {})}
+        obs, info = env.reset(seed=seed + k, options=options)
         policy.reset(env)
         episode: dict[str, list] = {key: [] for key in steps}
         while True:
@@ -114,6 +118,7 @@ def record(
                 break
         success = bool(info["episode_success"])
         successes += success
+        by_task.setdefault(str(info["task"]), []).append(success)
         steps_run += len(episode["actions"])
         if success or keep_failed:
             length = len(episode["actions"])
@@ -150,6 +155,7 @@ def record(
         "steps_run": steps_run,
         "successes": successes,
         "success_rate": successes / episodes,
+        "success_by_task": {name: float(np.mean(v)) for name, v in by_task.items()},
         "keep_failed": keep_failed,
         "observation_size": obs_dim,
         "action_size": act_dim,
@@ -170,6 +176,37 @@ def record(
         privileged=privileged,
         metadata=metadata,
     )
+
+
+def concatenate(parts: list[Demos]) -> Demos:
+    """Demos of several tasks as one set (a warm start over every phase of a curriculum): steps
+    and episodes in order, `privileged` zero-padded to the widest part (the phases' physics draws
+    may differ in number), and metadata that keeps each part's and sums what was run."""
+    if len(parts) == 1:
+        return parts[0]
+    arrays = {k: np.concatenate([getattr(p, k) for p in parts]) for k in (*STEP_KEYS, *EPISODE_KEYS)}
+    privileged = None
+    blocks = [p.privileged for p in parts if p.privileged is not None]
+    if len(blocks) == len(parts):
+        width = max(b.shape[1] for b in blocks)
+        privileged = np.concatenate([np.pad(b, ((0, 0), (0, width - b.shape[1]))) for b in blocks])
+    meta = [p.metadata for p in parts]
+    run, ok = sum(m.get("episodes_run", p.num_episodes) for m, p in zip(meta, parts)), sum(m.get("successes", 0) for m in meta)
+    by_task = {f"{m.get('task')}/{name}" if len(m.get("success_by_task", {})) > 1 else str(m.get("task")): rate
+               for m in meta for name, rate in m.get("success_by_task", {}).items()}
+    metadata = {
+        "format": meta[0].get("format"),
+        "task": " + ".join(str(m.get("task")) for m in meta),
+        "stage": ", ".join(dict.fromkeys(str(m.get("stage")) for m in meta)),
+        "episodes_run": run,
+        "episodes_kept": int(arrays["episode_lengths"].size),
+        "steps_run": sum(m.get("steps_run", p.num_steps) for m, p in zip(meta, parts)),
+        "successes": ok,
+        "success_rate": ok / run if run else 0.0,
+        "success_by_task": by_task,
+        "parts": meta,
+    }
+    return Demos(**arrays, privileged=privileged, metadata=metadata)
 
 
 def generate(

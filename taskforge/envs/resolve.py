@@ -53,6 +53,13 @@ class ResolvedCurriculum:
     """Legal but probably unintended (see `curriculum_warnings`): `validate` and `train` print them
     and `train` writes them to the run's events."""
 
+    def warm_start_phases(self) -> list[CurriculumPhase]:
+        """The phases the warm start's demos and DAgger rollouts come from (`warm_start.phase`)."""
+        ws = self.spec.warm_start
+        if ws is None:
+            return []
+        return list(self.phases) if ws.phase == "all" else [self.phases[ws.phase]]
+
 
 def load_curriculum(path: str | Path) -> ResolvedCurriculum:
     """A curriculum with its agent preset and task files loaded and cross-checked."""
@@ -147,13 +154,14 @@ def _check_warm_start(
     if agent.policy.type != "mlp":
         msg = f"warm start supports MLP policies only; the agent's policy.type is '{agent.policy.type}'"
         issues.append(SpecIssue(str(path), "warm_start", msg))
-    if ws.phase >= len(phases):
-        msg = f"no phase {ws.phase}; expected an index below {len(phases)} (phases counts from 0)"
+    if ws.phase != "all" and ws.phase >= len(phases):
+        msg = f"no phase {ws.phase}; expected an index below {len(phases)} (phases counts from 0) or 'all'"
         issues.append(SpecIssue(str(path), "warm_start.phase", msg))
-    elif ws.stage is not None and ws.stage not in phases[ws.phase].task.stage_names:
-        task = phases[ws.phase]
-        msg = f"no stage '{ws.stage}' in {task.task_file}; {expected_one_of(ws.stage, task.task.stage_names)}"
-        issues.append(SpecIssue(str(path), "warm_start.stage", msg))
+    elif ws.stage is not None:
+        for phase in phases if ws.phase == "all" else [phases[ws.phase]]:
+            if ws.stage not in phase.task.stage_names:
+                msg = f"no stage '{ws.stage}' in {phase.task_file}; {expected_one_of(ws.stage, phase.task.stage_names)}"
+                issues.append(SpecIssue(str(path), "warm_start.stage", msg))
     if ws.demos is None:
         return None
     demos_file = resolve_relative(path, ws.demos)

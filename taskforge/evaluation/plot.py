@@ -34,7 +34,9 @@ def run_figure(run_dir: str | Path) -> Figure:
         raise SpecError.single(run.path, "", f"no {run.metrics.name} with records; expected a taskforge run directory")
     events = [e for e in run.read_events() if "to_stage" in e]  # promotions and demotions
 
-    fig, (ax_ret, ax_succ) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    per_task = sorted({k for m in metrics for k in m if k.startswith("eval/")})  # `evaluation.tasks: all`
+    fig, axes = plt.subplots(3 if per_task else 2, 1, figsize=(9, 9 if per_task else 6), sharex=True)
+    ax_ret, ax_succ = axes[0], axes[1]
     rows = [m for m in metrics if m.get("return_mean") is not None]
     ax_ret.plot([m["step"] for m in rows], [m["return_mean"] for m in rows], lw=1)
     ax_ret.set_ylabel("episode return (train)")
@@ -47,11 +49,14 @@ def run_figure(run_dir: str | Path) -> Figure:
     if evals:
         ev = _evaluation_settings(run)
         label = f"evaluation, {ev['split']} goals: stage {ev['stage']}" if ev else "evaluation"
+        label += f", mean over {len(per_task)} tasks" if per_task else ""
         ax_succ.plot([m["step"] for m in evals], [m["eval_success_rate"] for m in evals], "o-", label=label)
     ax_succ.set_ylabel("success rate")
     ax_succ.set_ylim(-0.02, 1.02)
-    ax_succ.set_xlabel("environment steps")
-    for ax in (ax_ret, ax_succ):
+    if per_task:
+        _per_task_curves(axes[2], metrics, per_task)
+    axes[-1].set_xlabel("environment steps")
+    for ax in axes:
         for e in events:
             ax.axvline(e["step"], color="grey", ls="--", lw=0.8)
     for e in events:
@@ -60,6 +65,16 @@ def run_figure(run_dir: str | Path) -> Figure:
     ax_succ.legend(loc="upper left", fontsize=8)
     ax_ret.set_title(run.path.name)
     return fig
+
+
+def _per_task_curves(ax, metrics: list[dict[str, Any]], keys: list[str]) -> None:
+    """One evaluation curve per task (`eval/<task>`): which task of a multi-task policy lags."""
+    for key in keys:
+        rows = [m for m in metrics if key in m]
+        ax.plot([m["step"] for m in rows], [m[key] for m in rows], "o-", ms=3, lw=1, label=key.removeprefix("eval/"))
+    ax.set_ylabel("evaluation success per task")
+    ax.set_ylim(-0.02, 1.02)
+    ax.legend(loc="lower right", fontsize=7, ncol=2)
 
 
 def _save(fig: Figure, out: Path) -> Path:

@@ -60,6 +60,11 @@ class EvaluationSpec(StrictModel):
     stage: str | None = None
     """Evaluate this stage of the current phase (e.g. the final `place`, to compare a curriculum
     with flat training); default: whichever stage the curriculum is on."""
+    tasks: Literal["current", "all"] = "current"
+    """`current`: the current phase's task (a task set's sub-tasks drawn at random). `all`: every
+    phase's task and, for a task set (MT10), each sub-task on its own, `episodes` each; logged per
+    task (`eval/<task>`) and as their mean (`eval_success_rate`). For one policy across MT10 or
+    across robot variants: the number that says it still does every task, not just the newest."""
     stop_on_success: bool = False
     """End each evaluation episode when the stage first succeeds. Success counts if it held at
     any step, so the success rate is unchanged and a good policy is evaluated several times
@@ -146,11 +151,21 @@ class WarmStartSpec(StrictModel):
     generate_episodes: int | None = Field(default=None, ge=1)
     """Or: record this many scripted episodes at the start of training (train goals; failed
     episodes are dropped). Exactly one of `demos` and `generate_episodes`."""
-    phase: int = Field(default=0, ge=0)
-    """Which phase's task the demos come from (index into `phases`)."""
+    phase: int | Literal["all"] = Field(default=0)
+    """Which phase's task the demos and DAgger's rollouts come from (index into `phases`), or
+    `all`: every phase's task (`generate_episodes` split evenly over them, DAgger's envs spread
+    over them), for one policy across robot variants or task sets."""
     stage: str | None = None
-    """Which stage of that task; default the phase's last stage. With `demos`, checked against
-    the stage the file was recorded on."""
+    """Which stage of that task; default the phase's last stage. With `phase: all` it must exist
+    in every phase. With `demos`, checked against the stage the file was recorded on."""
+
+    @field_validator("phase", mode="before")
+    @classmethod
+    def _phase_index(cls, phase: object) -> object:
+        """One clear line for a bad value (the union's own errors would give one per member)."""
+        if phase == "all" or (isinstance(phase, int) and not isinstance(phase, bool) and phase >= 0):
+            return phase
+        raise ValueError(f"expected a phase index counting from 0, or 'all'; got {phase!r}")
     bc_epochs: int = Field(default=50, ge=0)
     bc_batch_size: int = Field(default=256, ge=1)
     bc_learning_rate: float = Field(default=1e-3, gt=0.0)

@@ -4,7 +4,7 @@ Workers reset themselves (gymnasium autoreset, inside the step that ends an epis
 scheduler's choice for a worker's *next* episode is pushed ahead of time into its `next_episode`
 attribute. That reset happens before the trainer learns the episode ended, so a choice drawn at
 the end of episode k starts episode k+2: a lag of one episode per worker. What an episode
-actually ran (stage, sub-task, replay label) comes back in its own `info`, so the driver never
+actually ran (phase, stage, sub-task, replay label) comes back in its own `info`, so the driver never
 has to track which pushed choice a worker consumed at which reset.
 """
 
@@ -36,13 +36,10 @@ class EpisodeStats:
 
 
 class CurriculumDriver:
-    def __init__(self, scheduler: CurriculumScheduler, envs: VectorEnv, phase: int, fallback_stage: str):
-        """`fallback_stage`: what a worker plays once the scheduler has moved to another phase
-        and the trainer has not yet rebuilt the envs (recorded as a stale episode)."""
+    def __init__(self, scheduler: CurriculumScheduler, envs: VectorEnv):
+        """`envs`: workers that can play every phase of the curriculum (`PhasedEnv`)."""
         self.scheduler = scheduler
         self.envs = envs
-        self.phase = phase
-        self._fallback = fallback_stage
         n = envs.num_envs
         self._return = np.zeros(n)
         self._length = np.zeros(n, dtype=int)
@@ -53,9 +50,7 @@ class CurriculumDriver:
 
     def _options(self) -> dict:
         assignment = self.scheduler.assign()
-        if assignment.phase != self.phase:
-            return {"stage": self._fallback}
-        return {"stage": assignment.stage, "task": assignment.task, "replay": assignment.replay}
+        return {"phase": assignment.phase, "stage": assignment.stage, "task": assignment.task, "replay": assignment.replay}
 
     def push(self, workers) -> None:
         """Draw the next episode of `workers` (all others keep what they were given)."""
@@ -72,7 +67,7 @@ class CurriculumDriver:
         final = infos["final_info"]
         events: list[CurriculumEvent] = []
         for i in done:
-            assignment = Assignment(self.phase, str(final["stage"][i]), str(final["task"][i]), bool(final["replay"][i]))
+            assignment = Assignment(int(final["phase"][i]), str(final["stage"][i]), str(final["task"][i]), bool(final["replay"][i]))
             success = bool(final["episode_success"][i])
             events += self.scheduler.record(assignment, success, int(self._length[i]))
             self.stats.returns.append(float(self._return[i]))

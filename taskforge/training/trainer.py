@@ -24,8 +24,8 @@ from tqdm import tqdm
 
 from taskforge.agents import PPOAgent, make_vector_env, set_torch_threads, wrap_for_training
 from taskforge.curriculum import CurriculumScheduler
-from taskforge.envs import ResolvedCurriculum, TaskEnv, load_curriculum
-from taskforge.rollouts import StageResult, evaluate
+from taskforge.envs import PhasedEnv, ResolvedCurriculum, load_curriculum
+from taskforge.rollouts import StageResult, evaluate, summarize
 from taskforge.run import RunDir, build_agent, load_checkpoint, save_checkpoint, save_json
 from taskforge.spec import AgentSpec, SpecError, TaskSpec
 from taskforge.training.driver import CurriculumDriver, EpisodeStats
@@ -100,9 +100,9 @@ def train(
             session.logger.event({"step": agent.global_step, "kind": "warning", "message": warning})
     if warm is not None:
         if warm.metrics is not None:  # evaluate right after pretraining: the curve starts where the demos left it
-            result = session.evaluate()
-            warm.metrics.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
-            session.say(f"eval {result.stage} on {result.split} after pretraining: success {result.success_rate:.2f}")
+            results = session.evaluate()
+            warm.metrics.update(_eval_metrics(results))
+            session.say(_eval_line(results, "after pretraining"))
         warm.record(run, session.logger)
     session.run(until=start.total if stop_at is None else min(start.total, stop_at))
     return run.path
@@ -150,9 +150,10 @@ def _start(cur: ResolvedCurriculum, run: RunDir, seed: int | None, steps: int | 
 # ------------------------------------------------------------------------------ the loop
 
 
-def _train_env(task: TaskSpec, task_file: str, privileged: bool, agent: AgentSpec) -> gymnasium.Env:
-    """One worker's env: a `TaskEnv` on the train goals, in trials for RL²."""
-    return wrap_for_training(TaskEnv(task, task_file, split="train", privileged=privileged), agent)
+def _train_env(phases: list[tuple[TaskSpec, str]], phase: int, privileged: bool, agent: AgentSpec) -> gymnasium.Env:
+    """One worker's env: every phase's task on the train goals (`PhasedEnv`: the curriculum says
+    which phase each episode plays, replay included), in trials for RL²."""
+    return wrap_for_training(PhasedEnv(phases, split="train", privileged=privileged, phase=phase), agent)
 
 
 class _Session:
@@ -167,7 +168,7 @@ class _Session:
         self.bar: tqdm | None = None
         self.collected = 0
         """Env steps of the rollout in progress (not yet learnt from)."""
-        self.last_eval: tuple[int, StageResult] | None = None
+        self.last_eval: tuple[int, list[tuple[int, str, str | None]], list[StageResult]] | None = None
         self.last_good = self.snapshot()  # what a Ctrl-C saves: the state after the last complete update
 
     def say(self, line: str) -> None:
@@ -183,13 +184,14 @@ class _Session:
         return copy.deepcopy({"config": self.config, "agent": self.agent.state_dict(), "curriculum": self.scheduler.state_dict()})
 
     def build_envs(self) -> tuple[VectorEnv, CurriculumDriver]:
-        """The current phase's training envs (a new phase is a new task file: new envs, same agent)."""
+        """The training envs: each worker can play every phase, so a new phase needs no new envs
+        and replay reaches back into earlier phases."""
         phase = self.cur.phases[self.scheduler.phase]
-        self.say(f"starting {self.cur.agent.ppo.num_envs} envs of phase {self.scheduler.phase} ({phase.task_file})")
-        privileged = self.cur.agent.asymmetric_critic
-        fns = [partial(_train_env, phase.task, str(phase.task_file), privileged, self.cur.agent)] * self.cur.agent.ppo.num_envs
-        envs = make_vector_env(fns, self.cur.agent.runtime)
-        return envs, CurriculumDriver(self.scheduler, envs, self.scheduler.phase, phase.stages[-1])
+        self.say(f"starting {self.cur.agent.ppo.num_envs} envs at phase {self.scheduler.phase} ({phase.task_file})")
+        phases = [(p.task, str(p.task_file)) for p in self.cur.phases]
+        fn = partial(_train_env, phases, self.scheduler.phase, self.cur.agent.asymmetric_critic, self.cur.agent)
+        envs = make_vector_env([fn] * self.cur.agent.ppo.num_envs, self.cur.agent.runtime)
+        return envs, CurriculumDriver(self.scheduler, envs)
 
     def run(self, until: int) -> None:
         agent, spec = self.agent, self.cur.spec
@@ -206,15 +208,12 @@ class _Session:
                 record = self.update(envs, driver)
                 if agent.global_step >= next_eval:
                     next_eval += every_eval
-                    result = self.evaluate()
-                    self.last_eval = (agent.global_step, result)
-                    record.update({"eval_success_rate": result.success_rate, "eval_return_mean": result.mean_return})
-                    self.say(f"eval {result.stage} on {result.split}: success {result.success_rate:.2f}")
+                    rows = self.eval_rows()
+                    results = self.evaluate(rows)
+                    self.last_eval = (agent.global_step, rows, results)
+                    record.update(_eval_metrics(results))
+                    self.say(_eval_line(results))
                 self.logger.log(agent.global_step, record)
-                if self.scheduler.phase != driver.phase:
-                    envs.close()
-                    envs, driver = self.build_envs()
-                    agent.reset_envs()
                 self.last_good = self.snapshot()
                 if agent.global_step >= next_ckpt:
                     next_ckpt += every_ckpt
@@ -271,23 +270,60 @@ class _Session:
                 **_episode_metrics(episodes), **{f"window_success/{k}": v for k, v in self.scheduler.success_rates().items()},
                 **losses}
 
-    def evaluate(self, stage: str | None = None) -> StageResult:
-        """The curriculum's `evaluation` settings on `stage` of the current phase (default: the
-        evaluation's stage, else the current one); seeded apart from training."""
-        phase, ev = self.cur.phases[self.scheduler.phase], self.cur.spec.evaluation
-        stage = stage or ev.stage or self.scheduler.stage
-        return evaluate(self.agent, phase.task, phase.task_file, stage, ev.split, ev.episodes, seed=self.seed + 10_000,
-                        stop_on_success=ev.stop_on_success)
+    def eval_rows(self, final: bool = False) -> list[tuple[int, str, str | None]]:
+        """What an evaluation plays, as (phase, stage, sub-task or None for the whole task): the
+        current phase's task, or (`evaluation.tasks: all`) every phase and every sub-task of a set.
+        The stage is `evaluation.stage`, else the current one in the current phase and the last
+        one in the others; `final`: the last one everywhere."""
+        ev = self.cur.spec.evaluation
+        rows: list[tuple[int, str, str | None]] = []
+        for p in range(len(self.cur.phases)) if ev.tasks == "all" else [self.scheduler.phase]:
+            current = p == self.scheduler.phase and not final
+            stage = ev.stage or (self.scheduler.stage if current else self.cur.phases[p].stages[-1])
+            names = self.scheduler.task_names(p) if ev.tasks == "all" else []
+            rows += [(p, stage, name) for name in (names if len(names) > 1 else [None])]
+        return rows
+
+    def evaluate(self, rows: list[tuple[int, str, str | None]] | None = None) -> list[StageResult]:
+        """The curriculum's `evaluation` settings on `rows` (default `eval_rows()`), seeded apart
+        from training."""
+        ev = self.cur.spec.evaluation
+        results = []
+        for p, stage, sub_task in rows or self.eval_rows():
+            phase = self.cur.phases[p]
+            results.append(evaluate(self.agent, phase.task, phase.task_file, stage, ev.split, ev.episodes,
+                                    sub_task=sub_task, seed=self.seed + 10_000, stop_on_success=ev.stop_on_success))
+        return results
 
     def final_evaluation(self) -> None:
         """What the run ends with: the final policy on the final stage (`evaluation.stage`, else the
-        phase's last), written to `final_eval.json` for `taskforge train` to print."""
-        stage = self.cur.spec.evaluation.stage or self.cur.phases[self.scheduler.phase].stages[-1]
-        if self.last_eval is not None and self.last_eval[0] == self.agent.global_step and self.last_eval[1].stage == stage:
-            result = self.last_eval[1]  # the periodic evaluation already ran on this very policy
+        phase's last) of what `evaluation.tasks` names, written to `final_eval.json` for
+        `taskforge train` to print."""
+        rows = self.eval_rows(final=True)
+        if self.last_eval is not None and self.last_eval[0] == self.agent.global_step and self.last_eval[1] == rows:
+            results = self.last_eval[2]  # the periodic evaluation already ran on this very policy
         else:
-            result = self.evaluate(stage)
-        save_json({"step": self.agent.global_step, **result.as_dict()}, self.run_dir.final_eval)
+            results = self.evaluate(rows)
+        save_json({"step": self.agent.global_step, **summarize(results)}, self.run_dir.final_eval)
+
+
+def _eval_metrics(results: list[StageResult]) -> dict[str, float]:
+    """An evaluation's metrics: the mean over its tasks and, with several, each task's own."""
+    metrics = {"eval_success_rate": float(np.mean([r.success_rate for r in results])),
+               "eval_return_mean": float(np.mean([r.mean_return for r in results]))}
+    if len(results) > 1:
+        metrics.update({f"eval/{r.task}": r.success_rate for r in results})
+    return metrics
+
+
+def _eval_line(results: list[StageResult], when: str = "") -> str:
+    """`eval place on test: success 0.94`; with several tasks the mean and the weakest one."""
+    first, mean = results[0], float(np.mean([r.success_rate for r in results]))
+    head = f"eval {', '.join(dict.fromkeys(r.stage for r in results))} on {first.split}{' ' + when if when else ''}"
+    if len(results) == 1:
+        return f"{head}: success {mean:.2f}"
+    worst = min(results, key=lambda r: r.success_rate)
+    return f"{head}: mean success {mean:.2f} over {len(results)} tasks (lowest: {worst.task} {worst.success_rate:.2f})"
 
 
 def _episode_metrics(episodes: EpisodeStats) -> dict[str, Any]:

@@ -86,6 +86,7 @@ def prepare_warm_start(
         learning_rate=ws.bc_learning_rate, privileged=demos.privileged, progress=progress,
     )
     metrics["bc_demo_episodes"] = float(demos.num_episodes)
+    metrics.update({f"demo_success/{name}": rate for name, rate in demos.metadata.get("success_by_task", {}).items()})
     _set_exploration(agent, ws, demos.observations, demos.actions)
 
     # 3. DAgger: the student's own states, labelled by the expert
@@ -147,16 +148,33 @@ def _demonstrations(
         return load_demos_file(cur), False
     if resumed and saved.is_file():
         return demo_io.load(saved), True
-    phase = cur.phases[ws.phase]
-    stage = ws.stage or phase.stages[-1]
-    _say(progress, f"warm start: recording {ws.generate_episodes} scripted episodes of {phase.task.name}:{stage}")
-    demos = demo_io.generate(phase.task_file, stage, ws.generate_episodes, seed=seed, split="train", progress=progress)
-    if demos.num_steps == 0:
-        raise SpecError.single(
-            cur.file, "warm_start.generate_episodes",
-            f"no scripted episode of stage '{stage}' succeeded out of {ws.generate_episodes}; no demos to learn from",
-        )
+    phases, total = cur.warm_start_phases(), ws.generate_episodes
+    assert total is not None  # the spec requires demos or generate_episodes
+    parts = []
+    for i, phase in enumerate(phases):  # `phase: all`: the episodes split evenly over the phases
+        episodes = total // len(phases) + (i < total % len(phases))
+        stage = ws.stage or phase.stages[-1]
+        _say(progress, f"warm start: recording {episodes} scripted episodes of {phase.task.name}:{stage}")
+        part = demo_io.generate(phase.task_file, stage, max(episodes, 1), seed=seed, split="train", progress=progress)
+        if part.num_steps == 0:
+            raise SpecError.single(
+                cur.file, "warm_start.generate_episodes",
+                f"no scripted episode of {phase.task.name}:{stage} succeeded out of {episodes}; no demos to learn from",
+            )
+        parts.append(part)
+    demos = demo_io.concatenate(parts)
+    # a result, not progress: printed with --no-progress too (and logged as demo_success/<task>)
+    print("warm start: scripted success on the train goals: " + _success_by_task(demos.metadata), file=sys.stderr)
     return demos, True
+
+
+def _success_by_task(metadata: dict[str, Any]) -> str:
+    """The expert's success per task, weak ones (below 0.8) named: a weak teacher caps its student,
+    so a user sees which task it is before blaming the learner."""
+    rates = metadata.get("success_by_task", {})
+    weak = [name for name, rate in rates.items() if rate < 0.8]
+    line = ", ".join(f"{name} {rate:.2f}" for name, rate in rates.items())
+    return line + (f" (weak teacher: {', '.join(weak)})" if weak else "")
 
 
 def _say(progress: bool, line: str) -> None:
@@ -182,10 +200,13 @@ def _labelled_env(phase, stage: str, privileged: bool) -> ExpertLabels:
 def _run_dagger(
     cur: ResolvedCurriculum, ws: WarmStartSpec, agent: PPOAgent, demos: demo_io.Demos, seed: int, progress: bool
 ) -> tuple[np.ndarray, np.ndarray]:
-    phase = cur.phases[ws.phase]
-    stage = ws.stage or demos.metadata.get("stage") or phase.stages[-1]
-    fn = partial(_labelled_env, phase, stage, agent.privileged_dim > 0)
-    envs = make_vector_env([fn] * agent.spec.ppo.num_envs, agent.spec.runtime)
+    phases = cur.warm_start_phases()
+    recorded = demos.metadata.get("stage") if len(phases) == 1 else None  # a demos file names its stage
+    fns = [  # env i plays phase i mod the number of phases
+        partial(_labelled_env, phase, ws.stage or recorded or phase.stages[-1], agent.privileged_dim > 0)
+        for phase in (phases[i % len(phases)] for i in range(agent.spec.ppo.num_envs))
+    ]
+    envs = make_vector_env(fns, agent.spec.runtime)
 
     def refit(observations: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         metrics = pretrain(
