@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+import yaml
 
 import taskforge
 from taskforge.cli import main
@@ -103,6 +104,20 @@ def test_record_drops_failed_episodes_unless_asked_and_files_round_trip(tmp_path
     assert back.metadata == demos.metadata
     for key, value in demos.arrays().items():
         np.testing.assert_array_equal(getattr(back, key), value)
+    env.close()
+
+
+def test_record_gives_each_task_of_a_task_set_its_own_goals_in_turn(tmp_path):
+    """MT10's ten tasks take turns and each walks through its own goals: 20 episodes give every
+    task goals 0 and 1 (indexing goals by episode alone gave each task 5 of its 50 goals)."""
+    spec = yaml.safe_load((TASKS / "metaworld/mt10.yaml").read_text())
+    spec["max_episode_steps"] = 3  # the goal bookkeeping, not the behaviour, is under test
+    (tmp_path / "mt10.yaml").write_text(yaml.safe_dump(spec))
+    env = taskforge.make(tmp_path / "mt10.yaml")
+    demos = record(env, episodes=20, seed=0, keep_failed=True)
+    tasks = list(env.backend.task_names)
+    assert list(demos.goal_indices) == [k // len(tasks) for k in range(20)]
+    assert sorted(demos.metadata["success_by_task"]) == sorted(tasks)
     env.close()
 
 

@@ -82,8 +82,11 @@ def record(
     `scripted_policy(env)`) and keep the successful ones (all with `keep_failed`).
 
     Episode k resets with `seed + k` on goal `(seed + k) mod number-of-goals` of the env's split,
-    so a seed fixes the whole dataset and consecutive episodes visit different goals. An episode
-    counts as successful when the stage's condition held at some step (`episode_success`).
+    so a seed fixes the whole dataset and consecutive episodes visit different goals. A task set's
+    sub-tasks take turns, and each walks its own goals in order (goal `(seed + k // tasks) mod
+    number-of-goals`): indexing goals by k alone would give MT10's ten tasks only five of their
+    fifty goals each, as 10 divides 50. An episode counts as successful when the stage's condition
+    held at some step (`episode_success`).
     """
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1 (got {episodes})")
@@ -99,7 +102,7 @@ def record(
     rotation = list(env.backend.task_names) if env.task_name is None and len(env.backend.task_names) > 1 else []
     bar = _progress_bar(episodes, f"{env.task.name}:{stage}", progress)
     for k in range(episodes):
-        goal_index = (seed + k) % num_goals
+        goal_index = (seed + k // max(1, len(rotation))) % num_goals
         options = {"stage": stage, "goal_index": goal_index, **({"task": rotation[k % len(rotation)]} if rotation else {})}
         obs, info = env.reset(seed=seed + k, options=options)
         policy.reset(env)
