@@ -67,7 +67,7 @@ def test_a_phase_first_played_late_is_seeded_by_the_first_reset(tmp_path):
     assert not np.array_equal(observations(3), observations(4))
 
 
-def test_replay_in_a_later_phase_plays_the_earlier_phase(tmp_path):
+def test_replay_in_a_later_phase_plays_the_earlier_phase(tmp_path, capsys):
     paths = two_tasks(tmp_path)
     (tmp_path / "agent.yaml").write_text(yaml.safe_dump(AGENT))
     curriculum = {
@@ -83,6 +83,7 @@ def test_replay_in_a_later_phase_plays_the_earlier_phase(tmp_path):
 
     [event] = read_jsonl(run / "events.jsonl")
     assert (event["from_phase"], event["to_phase"]) == (0, 1)
+    assert "promote: pendulum-a:swing -> pendulum-b:hold" in capsys.readouterr().err  # which task, not only the stage
     later = [m for m in read_jsonl(run / "metrics.jsonl") if m["step"] > event["step"] + 200]
     assert later and all(m["phase"] == 1 for m in later)
     # after the promotion, phase 1 ('hold') is the current stage and phase 0 ('swing') is replayed

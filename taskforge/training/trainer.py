@@ -262,13 +262,19 @@ class _Session:
             # warm-started run its own step would sit the expert's steps earlier on every plot
             self.logger.event({**asdict(event), "step": agent.global_step, "curriculum_step": event.step})
             why = ", step budget spent" if event.reason == "budget" else ""
-            self.say(f"{event.kind}: {event.from_stage} -> {event.to_stage} (success {event.success_rate:.2f}{why})")
+            moved = f"{self.where(event.from_phase, event.from_stage)} -> {self.where(event.to_phase, event.to_stage)}"
+            self.say(f"{event.kind}: {moved} (success {event.success_rate:.2f}{why})")
         window = self.scheduler.success_rates().get(f"{self.scheduler.phase}/{self.scheduler.stage}", 0.0)
         bar.set_postfix_str(f"stage {self.scheduler.stage}, success {window:.2f} over the window | "
                             f"last update {sps:,.0f} steps/s (collect + learn)")
         return {"phase": self.scheduler.phase, "stage": self.scheduler.stage, "steps_per_s": sps,
                 **_episode_metrics(episodes), **{f"window_success/{k}": v for k, v in self.scheduler.success_rates().items()},
                 **losses}
+
+    def where(self, phase: int, stage: str) -> str:
+        """A stage as the console names it: with several phases, which phase's task it belongs to
+        (the xArm7 variants share their stage names, so `place -> place` would say nothing)."""
+        return stage if len(self.cur.phases) == 1 else f"{self.cur.phases[phase].task.name}:{stage}"
 
     def eval_rows(self, final: bool = False) -> list[tuple[int, str, str | None]]:
         """What an evaluation plays, as (phase, stage, sub-task or None for the whole task): the
