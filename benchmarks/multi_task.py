@@ -62,7 +62,8 @@ def verdict(variant: str, records: list[dict[str, Any]], total: int) -> str:
     goal = GOALS[variant.split("-")[0]]
     ends = [last_evaluation(r) for r in finished]
     met = all(e["mean"] >= goal["mean"] and min(e["tasks"].values() or [e["mean"]]) >= goal["each"] for e in ends if e)
-    return f"{'met' if met else 'not met'} on {len(finished)} finished seed(s) (mean >= {goal['mean']}, every task >= {goal['each']})"
+    rule = (f"mean >= {goal['mean']}, " if goal["mean"] else "") + f"every task >= {goal['each']}"
+    return f"{'met' if met else 'not met'} on {len(finished)} finished seed(s) ({rule})"
 
 
 def plot(records: dict[str, dict[str, Any]], variants: list[str], out: Path) -> Path:
@@ -84,8 +85,9 @@ def plot(records: dict[str, dict[str, Any]], variants: list[str], out: Path) -> 
             ax.plot(steps, ys, ":", lw=1, label=task)
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel("held-out success")
-        ax.set_title(variant)
-        ax.legend(loc="lower right", fontsize=6, ncol=2)
+        ax.set_title(variant if runs else f"{variant} (no run yet)")
+        if runs:
+            ax.legend(loc="lower right", fontsize=6, ncol=2)
     axes[-1, 0].set_xlabel("environment steps (expert steps included)")
     return save_figure(fig, out)
 
