@@ -50,8 +50,11 @@ RUNS = ROOT / "benchmarks/runs/rl2"
 TRIAL_EPISODES = 5  # agents/rl2.yaml's K; the PPO baseline is evaluated over the same trials
 
 
-def meta_evaluate(run_dir: Path, step: int, trials: int, sampled: bool) -> list[dict]:
-    """Meta-train and meta-test evaluation of the run's checkpoint at `step`, cached per step.
+def meta_evaluate(
+    run_dir: Path, step: int, trials: int, sampled: bool, trial_episodes: int = TRIAL_EPISODES,
+    splits: tuple[str, ...] = ("train", "test"),
+) -> list[dict]:
+    """Meta-train and meta-test evaluation (`splits`) of the run's checkpoint at `step`, cached per step.
 
     `sampled`: act by sampling from the policy instead of taking its mean. An RL² policy's
     exploration in a trial's first episodes is its sampling noise as much as its mean (Duan et
@@ -59,10 +62,10 @@ def meta_evaluate(run_dir: Path, step: int, trials: int, sampled: bool) -> list[
     Cache entries written before this option had no `sampled` key: they are mean-action ones."""
     cache = run_dir / "meta_evals.jsonl"
     done = [e for e in read_jsonl(cache) if e["step"] == step and e["trials"] == trials and e.get("sampled", False) == sampled]
-    for split in ("train", "test"):
+    for split in splits:
         if any(e["split"] == split for e in done):
             continue
-        report = evaluate_run(RunDir(run_dir).checkpoint, split=split, trials=trials, trial_episodes=TRIAL_EPISODES,
+        report = evaluate_run(RunDir(run_dir).checkpoint, split=split, trials=trials, trial_episodes=trial_episodes,
                               deterministic=not sampled)
         row = report["rows"][0]
         entry = {"step": step, "split": split, "trials": trials, "sampled": sampled, "success_rate": row["success_rate"],

@@ -138,7 +138,7 @@ def evaluate(
     envs = [
         RL2Trial(
             TaskEnv(task, task_file, stage=stage, split=split, task_name=sub_task, privileged=privileged, end_on_success=stop_on_success),
-            k, augment=rl2,
+            k, augment=rl2, reward_scale=agent.spec.rl2.reward_input_scale if agent.spec.rl2 else 1.0,
         )
         for _ in range(min(parallel, trials))
     ]

@@ -253,13 +253,15 @@ def test_lstm_sequence_evaluation_resets_at_episode_starts_inside_the_sequence()
     torch.testing.assert_close(value[k:, :1], suffix_value, rtol=0, atol=1e-6)
 
 
-@pytest.mark.parametrize("core", ["lstm", "gru"])
-def test_recurrent_torso_runs_segments_exactly_as_stepping_one_step_at_a_time(core):
+@pytest.mark.parametrize("core,encoder", [("lstm", []), ("gru", []), ("gru", [5, 6])])
+def test_recurrent_torso_runs_segments_exactly_as_stepping_one_step_at_a_time(core, encoder):
     """The torso runs the core over whole segments between episode starts; the reference is the
     plain per-step loop that zeroes the state wherever an env starts (starts at t=0, mid-sequence,
-    in one env only, in both, and on the last step)."""
+    in one env only, in both, and on the last step). With `encoder_sizes` the core reads the
+    encoder's features of each step."""
     torch.manual_seed(0)
-    torso = RecurrentTorso(3, PolicySpec(type=core, hidden_sizes=[16], recurrent_size=8))
+    torso = RecurrentTorso(3, PolicySpec(type=core, hidden_sizes=[16], recurrent_size=8, encoder_sizes=encoder))
+    assert len([m for m in torso.encoder if isinstance(m, torch.nn.Linear)]) == len(encoder)
     T, N = 12, 3
     x = torch.randn(T, N, 3)
     starts = torch.zeros(T, N, dtype=torch.bool)
@@ -269,7 +271,7 @@ def test_recurrent_torso_runs_segments_exactly_as_stepping_one_step_at_a_time(co
     expected, ref_state = [], state
     for x_t, start_t in zip(x, starts):
         ref_state = tuple(part * (~start_t).float().view(1, -1, 1) for part in ref_state)
-        out, ref_state = torso.core(x_t.unsqueeze(0), ref_state if core == "lstm" else ref_state[0])
+        out, ref_state = torso.core(torso.encoder(x_t.unsqueeze(0)), ref_state if core == "lstm" else ref_state[0])
         ref_state = ref_state if core == "lstm" else (ref_state,)
         expected.append(out)
     with torch.no_grad():

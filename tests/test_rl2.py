@@ -68,8 +68,11 @@ def vector(env_fn, n: int) -> SyncVectorEnv:
 
 # ---------------------------------------------------------------------------------- the wrapper
 
-def test_trial_wrapper_aligns_previous_action_reward_and_episode_start_with_the_right_step():
-    env = RL2Trial(GoalBandit(length=2), trial_episodes=3)
+@pytest.mark.parametrize("reward_scale", [1.0, 0.1])
+def test_trial_wrapper_aligns_previous_action_reward_and_episode_start_with_the_right_step(reward_scale):
+    """With `reward_scale` (`rl2.reward_input_scale`) the input carries the scaled reward; the
+    reward the agent learns from stays as the env paid it."""
+    env = RL2Trial(GoalBandit(length=2), trial_episodes=3, reward_scale=reward_scale)
     obs, info = env.reset(seed=0)
     goal = info["goal"]
     np.testing.assert_array_equal(obs, [0.0, 0.0, 0.0, 1.0])  # obs, no action, no reward, episode start
@@ -80,7 +83,7 @@ def test_trial_wrapper_aligns_previous_action_reward_and_episode_start_with_the_
         clipped = float(np.clip(action[0], -1, 1))
         assert reward == pytest.approx(1.0 - abs(clipped - goal))
         # this step's clipped action and reward ride on the next observation
-        assert obs[1] == pytest.approx(clipped) and obs[2] == pytest.approx(reward)
+        assert obs[1] == pytest.approx(clipped) and obs[2] == pytest.approx(reward * reward_scale)
         inner_end = t % 2 == 1
         assert obs[3] == float(inner_end and t < 5)  # the next episode's first observation is flagged
         if inner_end and t < 5:
@@ -298,6 +301,9 @@ def test_rl2_agent_reads_the_augmented_observation():
         ({"algo": "rl2", "rl2": {"trial_episodes": 2}}, "needs a recurrent policy"),
         ({"rl2": {"trial_episodes": 2}}, "an 'rl2' section needs algo: rl2"),
         ({"algo": "rl2", "rl2": {"trial_episodes": 0}, "policy": {"type": "gru"}}, "rl2.trial_episodes"),
+        ({"algo": "rl2", "rl2": {"trial_episodes": 2, "reward_input_scale": 0}, "policy": {"type": "gru"}}, "rl2.reward_input_scale"),
+        ({"policy": {"encoder_sizes": [64]}}, "'encoder_sizes' is for recurrent policies"),
+        ({"policy": {"type": "gru", "encoder_sizes": [0]}}, "'encoder_sizes' must all be >= 1"),
         ({"policy": {"type": "gru"}, "ppo": {"rollout_steps": 100, "bptt_length": 30}}, "must divide 'rollout_steps'"),
     ],
 )

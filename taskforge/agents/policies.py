@@ -78,8 +78,9 @@ class MLPTorso(nn.Module):
 
 
 class RecurrentTorso(nn.Module):
-    """An LSTM or GRU over the raw input, then an MLP (as SB3's RecurrentPPO for vector
-    observations). RL² uses the GRU (Duan et al., 2016).
+    """An LSTM or GRU over the input, then an MLP (as SB3's RecurrentPPO for vector
+    observations); with `encoder_sizes`, an MLP encodes the input before the core (as
+    Meta-World+'s RL²). RL² uses the GRU (Duan et al., 2016).
 
     The hidden state is zeroed wherever an episode starts, both when acting and when re-running
     sequences in the update (LSTM details #3 and #5); otherwise the update would see a different
@@ -92,8 +93,9 @@ class RecurrentTorso(nn.Module):
     def __init__(self, in_dim: int, spec: PolicySpec) -> None:
         super().__init__()
         self.in_dim = in_dim
+        self.encoder = mlp(in_dim, spec.encoder_sizes, spec.activation)  # empty: the identity
         core = nn.LSTM if spec.type == "lstm" else nn.GRU
-        self.core = core(in_dim, spec.recurrent_size)
+        self.core = core(spec.encoder_sizes[-1] if spec.encoder_sizes else in_dim, spec.recurrent_size)
         for name, param in self.core.named_parameters():  # LSTM detail #1: orthogonal weights, zero biases
             if "bias" in name:
                 nn.init.constant_(param, 0.0)
@@ -108,6 +110,7 @@ class RecurrentTorso(nn.Module):
         return tuple(torch.zeros(size) for _ in range(self._parts))
 
     def forward(self, x: torch.Tensor, state: Hidden, episode_starts: torch.Tensor) -> tuple[torch.Tensor, Hidden]:
+        x = self.encoder(x)  # per step: no state in it
         starts = torch.nonzero(episode_starts.any(dim=1)).flatten().tolist()
         bounds = sorted({0, *starts, x.shape[0]})
         outputs = []

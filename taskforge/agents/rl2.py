@@ -48,18 +48,19 @@ class RL2Trial(gymnasium.Wrapper):
     `trial_lengths` (one entry per episode of the trial: the adaptation curve).
 
     With `augment=True` (RL²) observations are `concat(obs, a_{t-1}, r_{t-1}, start_t)`, where
-    `a_{t-1}` is the action the env received (clipped to the action box), `r_{t-1}` the raw reward
-    of that step and `start_t` is 1 on the first observation of every episode; on the trial's
+    `a_{t-1}` is the action the env received (clipped to the action box), `r_{t-1}` the reward
+    of that step times `reward_scale` (`rl2.reward_input_scale`) and `start_t` is 1 on the first observation of every episode; on the trial's
     first observation the action and reward are zeros. With `augment=False` observations pass
     through unchanged: how a memoryless policy is evaluated over the same trials.
     """
 
-    def __init__(self, env: gymnasium.Env, trial_episodes: int, augment: bool = True) -> None:
+    def __init__(self, env: gymnasium.Env, trial_episodes: int, augment: bool = True, reward_scale: float = 1.0) -> None:
         super().__init__(env)
         if trial_episodes < 1:
             raise ValueError(f"trial_episodes must be >= 1, got {trial_episodes}")
         self.trial_episodes = trial_episodes
         self.augment = augment
+        self.reward_scale = reward_scale
         if augment:
             self.observation_space = trial_observation_space(env.observation_space, env.action_space)
         self._no_action = np.zeros(env.action_space.shape, dtype=np.float32)
@@ -103,7 +104,7 @@ class RL2Trial(gymnasium.Wrapper):
     def _observe(self, obs: np.ndarray, action: np.ndarray, reward: float, start: bool) -> np.ndarray:
         if not self.augment:
             return obs
-        return np.concatenate([obs, action, [reward, float(start)]]).astype(np.float32)
+        return np.concatenate([obs, action, [reward * self.reward_scale, float(start)]]).astype(np.float32)
 
 
 def agent_observation_space(spec: AgentSpec, obs_space: Box, action_space: Box) -> Box:
@@ -113,4 +114,4 @@ def agent_observation_space(spec: AgentSpec, obs_space: Box, action_space: Box) 
 
 def wrap_for_training(env: gymnasium.Env, spec: AgentSpec) -> gymnasium.Env:
     """The env as the agent trains on it: trials of augmented observations for RL², else as is."""
-    return RL2Trial(env, spec.trial_episodes) if spec.algo == "rl2" else env
+    return RL2Trial(env, spec.trial_episodes, reward_scale=spec.rl2.reward_input_scale) if spec.rl2 is not None else env

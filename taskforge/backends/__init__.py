@@ -41,6 +41,7 @@ BACKENDS: dict[str, BackendInfo] = {
     "gymnasium": BackendInfo("taskforge.backends.gymnasium_env"),
     # in `control.mode: joint` the xArm7's action is 8-D: `taskforge.demos` checks the shape
     "xarm7": BackendInfo("taskforge.backends.xarm7", camera="front", cartesian_actions=True),
+    "point_mass": BackendInfo("taskforge.backends.point_mass"),
 }
 assert set(BACKENDS) == set(BACKEND_TYPES), "every backend schema (spec/backends.py) needs a record here"
 

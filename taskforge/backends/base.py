@@ -7,12 +7,14 @@ A backend knows nothing about rewards, stages' success or agents (those live in
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Literal, Protocol
 
 import mujoco
 import numpy as np
 from gymnasium.spaces import Box
 
+from taskforge.spec import SpecIssue, TaskSpec
 from taskforge.terms import Features
 
 Split = Literal["train", "test"]
@@ -44,6 +46,19 @@ def draw_starts_apart(
             return starts
         starts[bad] = rng.uniform(low, high, size=(int(bad.sum()), len(low)))
     return None
+
+
+def mujoco_only_issues(task: TaskSpec, file: str | Path, what: str) -> list[SpecIssue]:
+    """The randomisation a backend without MuJoCo or an object (`what`, e.g. 'a Gymnasium env')
+    cannot honour: physics terms and a random object start."""
+    issues = []
+    if task.randomization.physics:
+        msg = f"physics randomisation needs a MuJoCo backend (metaworld, xarm7); remove it for {what}"
+        issues.append(SpecIssue(str(file), "randomization.physics", msg))
+    if task.randomization.object_start != "goal_set":
+        msg = f"{what} has no object to place; expected 'goal_set' (the default)"
+        issues.append(SpecIssue(str(file), "randomization.object_start", msg))
+    return issues
 
 
 class Backend(Protocol):

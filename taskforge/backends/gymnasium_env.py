@@ -16,7 +16,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.spaces import Box
 
-from taskforge.backends.base import GoalOverride, Split
+from taskforge.backends.base import GoalOverride, Split, mujoco_only_issues
 from taskforge.spec import SpecIssue, TaskSpec, expected_one_of
 from taskforge.spec.backends import GymnasiumBackendSpec
 from taskforge.spec.task import GoalsSpec
@@ -90,11 +90,7 @@ def check_task(task: TaskSpec, file: str | Path) -> list[SpecIssue]:
     if not isinstance(probe.action_space, Box):
         issues.append(SpecIssue(str(file), "backend.env", f"needs a continuous (Box) action space; {spec.env} has {probe.action_space}"))
     probe.close()
-    if task.randomization.physics:
-        issues.append(SpecIssue(str(file), "randomization.physics", "physics randomisation needs a MuJoCo backend (metaworld); remove it for gymnasium envs"))
-    if task.randomization.object_start != "goal_set":
-        issues.append(SpecIssue(str(file), "randomization.object_start", "a Gymnasium env has no object to place; expected 'goal_set' (the default)"))
-    return issues
+    return issues + mujoco_only_issues(task, file, "a Gymnasium env")
 
 
 def create(task: TaskSpec, file: str | Path) -> GymnasiumBackend:

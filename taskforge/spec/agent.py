@@ -20,6 +20,10 @@ class PolicySpec(StrictModel):
     activation: Literal["tanh", "relu", "elu"] = "tanh"
     recurrent_size: int = Field(default=128, ge=1)
     """Width of the LSTM or GRU core (recurrent policies only)."""
+    encoder_sizes: list[int] = Field(default_factory=list)
+    """Recurrent policies: an MLP of these widths (`activation` after each layer) between the
+    input and the core; empty = the core reads the raw input. Meta-World+'s RL² encodes its input
+    with 3 x 256 tanh layers before a 256-unit GRU (`agents/rl2_mwplus.yaml`)."""
     action_bounds: Literal["clip", "squash"] = "clip"
     """How Gaussian samples meet the action box: `clip` at the env boundary (CleanRL) or `squash`
     with tanh (log-prob corrected)."""
@@ -27,8 +31,11 @@ class PolicySpec(StrictModel):
 
     @model_validator(mode="after")
     def _positive_sizes(self) -> PolicySpec:
-        if any(h < 1 for h in self.hidden_sizes):
-            raise ValueError(f"'hidden_sizes' must all be >= 1 (got {self.hidden_sizes})")
+        for name in ("hidden_sizes", "encoder_sizes"):
+            if any(h < 1 for h in getattr(self, name)):
+                raise ValueError(f"'{name}' must all be >= 1 (got {getattr(self, name)})")
+        if self.encoder_sizes and self.type == "mlp":
+            raise ValueError("'encoder_sizes' is for recurrent policies (type 'gru' or 'lstm'); an mlp has only 'hidden_sizes'")
         return self
 
 
@@ -82,6 +89,11 @@ class RL2Spec(StrictModel):
 
     trial_episodes: int = Field(default=10, ge=1, le=1000)
     """K, the episodes per trial. Meta-test runs one trial of K episodes per held-out goal."""
+    reward_input_scale: float = Field(default=1.0, gt=0.0, le=1000.0)
+    """The previous reward enters the policy's input multiplied by this (what the agent learns
+    from is the unscaled reward). With `ppo.norm_obs` the input is normalised anyway;
+    Meta-World+ feeds raw inputs and scales the reward by 0.1 (V2 rewards are 0-10 per step):
+    per its paper, an unbounded reward in the recurrent state makes RL² collapse."""
 
 
 class RuntimeSpec(StrictModel):

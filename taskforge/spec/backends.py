@@ -273,8 +273,39 @@ class XArm7BackendSpec(StrictModel):
         )
 
 
+class PointMassBackendSpec(StrictModel):
+    """A point robot in the plane that starts at the origin and must reach a goal on an arc
+    around it: the classic meta-RL testbed (Finn et al. 2017's 2-D navigation; the sparse
+    semicircle of Rakelly et al. 2019 and Zintgraf et al. 2020). No physics engine: a step is
+    a few numpy operations, so meta-RL can be checked in minutes. See
+    `taskforge/backends/point_mass.py`."""
+
+    type: Literal["point_mass"]
+    goal_radius: float = Field(default=1.0, gt=0.0, le=10.0)
+    """Distance of every goal from the start (m)."""
+    goal_arc: Interval = (0.0, 180.0)
+    """Angles (degrees, anticlockwise from +x) the goals are drawn between: [0, 180] is the
+    semicircle of the literature."""
+    max_step: float = Field(default=0.1, gt=0.0, le=1.0)
+    """Displacement (m) per step at action 1 on an axis."""
+    bound: float = Field(default=2.0, gt=0.0, le=100.0)
+    """The point is clamped to the square [-bound, bound]^2."""
+
+    @model_validator(mode="after")
+    def _arc(self) -> PointMassBackendSpec:
+        _check_intervals(self, ("goal_arc",))
+        if self.goal_radius >= self.bound:
+            raise ValueError(f"'goal_radius' ({self.goal_radius:g}) must be < 'bound' ({self.bound:g}), or no goal is reachable")
+        return self
+
+    def describe(self) -> str:
+        """One line for summaries (`taskforge validate`, `taskforge tasks`)."""
+        low, high = self.goal_arc
+        return f"point mass, goals on an arc of radius {self.goal_radius:g} m from {low:g} to {high:g} degrees"
+
+
 BackendSpec = Annotated[
-    MetaWorldBackendSpec | GymnasiumBackendSpec | XArm7BackendSpec, Field(discriminator="type")
+    MetaWorldBackendSpec | GymnasiumBackendSpec | XArm7BackendSpec | PointMassBackendSpec, Field(discriminator="type")
 ]
 BACKEND_TYPES: tuple[str, ...] = tuple(
     typing.get_args(member.model_fields["type"].annotation)[0] for member in typing.get_args(typing.get_args(BackendSpec)[0])

@@ -314,11 +314,16 @@ class _Session:
 
 
 def _eval_metrics(results: list[StageResult]) -> dict[str, float]:
-    """An evaluation's metrics: the mean over its tasks and, with several, each task's own."""
+    """An evaluation's metrics: the mean over its tasks and, with several, each task's own; for
+    trials of K > 1 episodes (RL²) also the adaptation curve, `eval_episode/k` = success at
+    episode k of a trial, so a run's log shows when its later episodes pull ahead of its first."""
     metrics = {"eval_success_rate": float(np.mean([r.success_rate for r in results])),
                "eval_return_mean": float(np.mean([r.mean_return for r in results]))}
     if len(results) > 1:
         metrics.update({f"eval/{r.task}": r.success_rate for r in results})
+    if results[0].trial_episodes > 1:
+        by_episode = np.concatenate([np.asarray(r.successes, dtype=float) for r in results]).mean(axis=0)
+        metrics.update({f"eval_episode/{k + 1}": float(rate) for k, rate in enumerate(by_episode)})
     return metrics
 
 
@@ -327,7 +332,11 @@ def _eval_line(results: list[StageResult], when: str = "") -> str:
     first, mean = results[0], float(np.mean([r.success_rate for r in results]))
     head = f"eval {', '.join(dict.fromkeys(r.stage for r in results))} on {first.split}{' ' + when if when else ''}"
     if len(results) == 1:
-        return f"{head}: success {mean:.2f}"
+        line = f"{head}: success {mean:.2f}"
+        if first.trial_episodes > 1 and first.successes:  # RL²: the ends of the adaptation curve
+            ends = np.asarray(first.successes, dtype=float).mean(axis=0)
+            line += f" (episode 1 {ends[0]:.2f} -> episode {first.trial_episodes} {ends[-1]:.2f})"
+        return line
     worst = min(results, key=lambda r: r.success_rate)
     return f"{head}: mean success {mean:.2f} over {len(results)} tasks (lowest: {worst.task} {worst.success_rate:.2f})"
 
