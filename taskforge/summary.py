@@ -76,13 +76,19 @@ def task_summary(task: TaskSpec) -> list[str]:
 
 def agent_summary(agent: AgentSpec) -> list[str]:
     p, ppo = agent.policy, agent.ppo
+    # the layers in the order the input meets them: encoder, core, MLP
+    shape = f"mlp {p.hidden_sizes}" if p.type == "mlp" else " -> ".join(
+        ([str(p.encoder_sizes)] if p.encoder_sizes else []) + [f"{p.type} {p.recurrent_size}"] + ([str(p.hidden_sizes)] if p.hidden_sizes else [])
+    )
+    scale = agent.rl2.reward_input_scale if agent.rl2 else 1.0
     return [
-        f"agent {agent.name}: {agent.algo}, {p.type} policy {p.hidden_sizes} ({p.activation}), "
+        f"agent {agent.name}: {agent.algo}, policy {shape} ({p.activation}), "
         f"actions {p.action_bounds}{', asymmetric critic' if agent.asymmetric_critic else ''}",
         f"  {ppo.num_envs} envs x {ppo.rollout_steps} steps per update, {ppo.update_epochs} epochs x "
         f"{ppo.num_minibatches} minibatches, lr {ppo.learning_rate:g}, gamma {ppo.gamma:g}, lambda {ppo.gae_lambda:g}"
         + (f", BPTT {ppo.bptt_length} steps" if p.type != "mlp" and ppo.bptt_length else ""),
-    ] + ([f"  RL² trials of {agent.trial_episodes} episodes per goal; input obs + previous action, reward, episode start"]
+    ] + ([f"  RL² trials of {agent.trial_episodes} episodes per goal; input obs + previous action, "
+          f"reward{f' x {scale:g}' if scale != 1.0 else ''}, episode start"]
          if agent.algo == "rl2" else [])
 
 

@@ -253,14 +253,15 @@ def test_lstm_sequence_evaluation_resets_at_episode_starts_inside_the_sequence()
     torch.testing.assert_close(value[k:, :1], suffix_value, rtol=0, atol=1e-6)
 
 
-@pytest.mark.parametrize("core,encoder", [("lstm", []), ("gru", []), ("gru", [5, 6])])
-def test_recurrent_torso_runs_segments_exactly_as_stepping_one_step_at_a_time(core, encoder):
+@pytest.mark.parametrize("core,encoder,hidden", [("lstm", [], [16]), ("gru", [], [16]), ("gru", [5, 6], [16]), ("gru", [5], [])])
+def test_recurrent_torso_runs_segments_exactly_as_stepping_one_step_at_a_time(core, encoder, hidden):
     """The torso runs the core over whole segments between episode starts; the reference is the
     plain per-step loop that zeroes the state wherever an env starts (starts at t=0, mid-sequence,
     in one env only, in both, and on the last step). With `encoder_sizes` the core reads the
-    encoder's features of each step."""
+    encoder's features of each step; with no `hidden_sizes` the torso's output is the core's."""
     torch.manual_seed(0)
-    torso = RecurrentTorso(3, PolicySpec(type=core, hidden_sizes=[16], recurrent_size=8, encoder_sizes=encoder))
+    torso = RecurrentTorso(3, PolicySpec(type=core, hidden_sizes=hidden, recurrent_size=8, encoder_sizes=encoder))
+    assert torso.out_dim == (hidden[-1] if hidden else 8)
     assert len([m for m in torso.encoder if isinstance(m, torch.nn.Linear)]) == len(encoder)
     T, N = 12, 3
     x = torch.randn(T, N, 3)

@@ -303,6 +303,7 @@ def test_rl2_agent_reads_the_augmented_observation():
         ({"algo": "rl2", "rl2": {"trial_episodes": 0}, "policy": {"type": "gru"}}, "rl2.trial_episodes"),
         ({"algo": "rl2", "rl2": {"trial_episodes": 2, "reward_input_scale": 0}, "policy": {"type": "gru"}}, "rl2.reward_input_scale"),
         ({"policy": {"encoder_sizes": [64]}}, "'encoder_sizes' is for recurrent policies"),
+        ({"policy": {"hidden_sizes": []}}, "an mlp policy needs at least one layer in 'hidden_sizes'"),
         ({"policy": {"type": "gru", "encoder_sizes": [0]}}, "'encoder_sizes' must all be >= 1"),
         ({"policy": {"type": "gru"}, "ppo": {"rollout_steps": 100, "bptt_length": 30}}, "must divide 'rollout_steps'"),
     ],

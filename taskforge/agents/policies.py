@@ -101,8 +101,8 @@ class RecurrentTorso(nn.Module):
                 nn.init.constant_(param, 0.0)
             else:
                 nn.init.orthogonal_(param, 1.0)
-        self.net = mlp(spec.recurrent_size, spec.hidden_sizes, spec.activation)
-        self.out_dim = spec.hidden_sizes[-1]
+        self.net = mlp(spec.recurrent_size, spec.hidden_sizes, spec.activation)  # empty: the identity
+        self.out_dim = spec.hidden_sizes[-1] if spec.hidden_sizes else spec.recurrent_size
         self._parts = 2 if spec.type == "lstm" else 1  # LSTM: (h, c); GRU: (h,)
 
     def initial_state(self, num_envs: int) -> Hidden:

@@ -16,7 +16,9 @@ from taskforge.spec.common import StrictModel
 class PolicySpec(StrictModel):
     type: Literal["mlp", "lstm", "gru"] = "mlp"
     """`mlp`: feed-forward; `lstm` / `gru`: a recurrent core before the MLP (RL² uses `gru`)."""
-    hidden_sizes: list[int] = Field(default_factory=lambda: [256, 256], min_length=1)
+    hidden_sizes: list[int] = Field(default_factory=lambda: [256, 256])
+    """Widths of the MLP (after the core for recurrent types, where `[]` puts the action and
+    value heads straight on the core's output, as Meta-World+'s RL²)."""
     activation: Literal["tanh", "relu", "elu"] = "tanh"
     recurrent_size: int = Field(default=128, ge=1)
     """Width of the LSTM or GRU core (recurrent policies only)."""
@@ -34,6 +36,8 @@ class PolicySpec(StrictModel):
         for name in ("hidden_sizes", "encoder_sizes"):
             if any(h < 1 for h in getattr(self, name)):
                 raise ValueError(f"'{name}' must all be >= 1 (got {getattr(self, name)})")
+        if not self.hidden_sizes and self.type == "mlp":
+            raise ValueError("an mlp policy needs at least one layer in 'hidden_sizes'")
         if self.encoder_sizes and self.type == "mlp":
             raise ValueError("'encoder_sizes' is for recurrent policies (type 'gru' or 'lstm'); an mlp has only 'hidden_sizes'")
         return self
