@@ -14,7 +14,11 @@ SHIPPED = sorted(
 )
 
 
-MEMORYLESS_BASELINES = {"benchmarks/configs/ml1_push_ppo.yaml", "benchmarks/configs/ml1_reach_ppo.yaml"}
+MEMORYLESS_BASELINES = {
+    "benchmarks/configs/ml1_push_ppo.yaml",
+    "benchmarks/configs/ml1_reach_ppo.yaml",
+    "benchmarks/configs/point_semicircle_ppo.yaml",
+}
 """PPO on a hidden goal on purpose: the baselines RL² is measured against."""
 
 
