@@ -1,7 +1,7 @@
 """The `taskforge` command (console script and `python -m taskforge`).
 
 A thin door in front of `taskforge.cli`: nothing heavy is imported before the `try`, so a Ctrl-C
-at any moment, the first half-second of imports included, ends quietly with exit code 130.
+at any moment, the first half-second of imports included, ends quietly with exit code 130; a closed pipe ends it quietly too.
 """
 
 import os
@@ -20,6 +20,11 @@ def run() -> None:
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(130)
+    except BrokenPipeError:
+        # The reader went away (`taskforge validate x.yaml | head -1`): as any Unix tool, stop
+        # quietly. stdout is pointed at devnull so the interpreter's final flush does not fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(141)  # 128 + SIGPIPE, what a shell reports for a tool killed by it
     sys.exit(code)
 
 

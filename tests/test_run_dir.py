@@ -141,3 +141,15 @@ def test_ctrl_c_while_importing_prints_no_traceback():
     )
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 130 and proc.stderr.strip() == "interrupted", proc.stderr
+
+
+def test_a_reader_that_closes_the_pipe_gets_no_traceback():
+    """`taskforge validate x.yaml | head -1`: head exits after one line and the next print hits a
+    closed pipe; the command must stop quietly (status 141, as a tool killed by SIGPIPE). Here the
+    pipe's read end is closed before the command starts, so its first print fails, deterministically."""
+    cmd = [sys.executable, "-m", "taskforge", "validate", str(ROOT / "curricula/pick_place.yaml")]
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # nobody will ever read: every write fails with EPIPE
+    proc = subprocess.run(cmd, cwd=ROOT, stdout=write_end, stderr=subprocess.PIPE, text=True, timeout=120)
+    os.close(write_end)
+    assert proc.returncode == 141 and "Traceback" not in proc.stderr, proc.stderr
