@@ -3,10 +3,10 @@
 Why it exists: RL² on Meta-World needs tens of millions of steps before it adapts (or not), so a
 broken implementation and a too-small budget look the same. On this testbed (Finn et al. 2017's
 2-D navigation; the sparse semicircle of Rakelly et al. 2019, PEARL, and Zintgraf et al. 2020,
-VariBAD) a working RL² adapts within a few hundred thousand steps: with the goal hidden and a
-reward only near the goal, the first episode of a trial must search the arc, and the later
-ones can go straight to where the reward was found. A memoryless policy cannot do better than
-one fixed sweep in every episode. A step is a few numpy operations (no physics engine).
+VariBAD) an experiment takes minutes, not hours: with the goal hidden and a reward only near the
+goal, the first episode of a trial must search the arc, and the later ones can go straight to
+where the reward was found. A memoryless policy cannot do better than one fixed sweep in every
+episode. A step is a few numpy operations (no physics engine).
 
 The point starts at the origin; an action `a` in [-1, 1]^2 moves it by `max_step * a`, clamped
 to the square [-bound, bound]^2. Goal `i` of a split is at angle `theta_i` on the arc of radius
