@@ -55,6 +55,16 @@ def first_adapted(points: list[dict]) -> int | None:
     return next((p["step"] for p in points if p["per_episode"][-1] - p["per_episode"][0] >= GOAL_GAP), None)  # never for K = 1
 
 
+def after_a_miss(meta_test: dict | None) -> str:
+    """Success in episodes 2..K of the meta-test trials whose first episode failed: 0 for a
+    deterministic memoryless policy (it repeats the miss), above 0 only for an agent that searches
+    elsewhere (`after_first_episode` in `taskforge eval`'s report)."""
+    after = (meta_test or {}).get("after_first_episode")
+    if not after or not after["miss"]["trials"]:
+        return "-"
+    return f"{after['miss']['success_rate']:.2f} ({after['miss']['trials']} trials)"
+
+
 def plot(runs: dict[str, dict], out: Path) -> Path:
     """Left: held-out success at episode 1 (dashed) and K (solid) vs steps, every seed. Right:
     the adaptation curve at each run's last meta-test."""
@@ -121,10 +131,10 @@ def main() -> None:
         gap = None if ends["meta_test"] is None else ends["meta_test"][-1] - ends["meta_test"][0]
         rows.append([name, f"{run['steps_done']:,}",
                      *("-" if e is None else f"{e[0]:.2f} -> {e[-1]:.2f}" for e in ends.values()),
-                     "-" if gap is None else f"{gap:+.2f}",
+                     "-" if gap is None else f"{gap:+.2f}", after_a_miss(run["meta_test"]),
                      "-" if run["first_adapted_step"] is None else f"{run['first_adapted_step']:,}", f"{run['steps_per_s']:,.0f}"])
     episodes = f"ep 1 -> {TRIAL_EPISODES}"
-    print_table(["run", "env steps", f"meta-test {episodes}", f"sampled {episodes}", "gap (mean actions)",
+    print_table(["run", "env steps", f"meta-test {episodes}", f"sampled {episodes}", "gap (mean actions)", "later, after a miss",
                  f"first eval with gap >= {GOAL_GAP}", "steps/s"], rows)
     rl2 = [r for r in runs.values() if r["variant"] == "rl2" and r["meta_test"]]
     met = len(rl2) == len(args.seeds) and all(r["meta_test"]["per_episode"][-1] - r["meta_test"]["per_episode"][0] >= GOAL_GAP for r in rl2)

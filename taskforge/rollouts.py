@@ -79,7 +79,7 @@ class StageResult:
             {"episode": k + 1, **_rate(successes[:, k]), "mean_return": float(returns[:, k].mean()) if self.trials else 0.0}
             for k in range(self.trial_episodes)
         ]
-        return {
+        row = {
             "task": self.task,
             "stage": self.stage,
             "split": self.split,
@@ -92,6 +92,24 @@ class StageResult:
             "mean_length": float(lengths.mean()) if lengths.size else 0.0,
             "per_episode": per_episode,
         }
+        if self.trial_episodes > 1:
+            row["after_first_episode"] = _after_first_episode(successes)
+        return row
+
+
+def _after_first_episode(successes: np.ndarray) -> dict[str, dict]:
+    """Success in episodes 2..K of the trials whose first episode succeeded (`hit`) and of those
+    whose first episode failed (`miss`).
+
+    Why: on a sparse task the mean adaptation curve mixes two behaviours. A deterministic
+    memoryless policy repeats its first episode, so it scores exactly 1 after a hit and 0 after
+    a miss; an agent that learnt from the trial keeps going back after a hit and searches
+    elsewhere after a miss, and only the second number tells it apart from the first."""
+    first = successes[:, 0]
+    return {
+        outcome: {"trials": int(mask.sum()), **_rate(successes[mask, 1:].ravel())}
+        for outcome, mask in (("hit", first), ("miss", ~first))
+    }
 
 
 def summarize(results: list[StageResult]) -> dict:

@@ -18,6 +18,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from taskforge.agents import PPOAgent, RL2Trial, agent_observation_space
 from taskforge.cli import main
 from taskforge.envs import TaskEnv, load_task
+from taskforge.rollouts import StageResult
 from taskforge.spec import AgentSpec
 from taskforge.training import train
 from tests.conftest import ROOT
@@ -284,6 +285,20 @@ def test_memoryless_policy_evaluated_in_trials_has_a_flat_adaptation_curve(tmp_p
     (row,) = json.loads(out.read_text())["rows"]
     returns = [e["mean_return"] for e in row["per_episode"]]
     assert len(returns) == 3 and returns[0] == pytest.approx(returns[1]) == pytest.approx(returns[2])
+    # repeating itself, it is exactly as good after a hit (1) and as bad after a miss (0) as before
+    after = row["after_first_episode"]
+    assert after["hit"]["trials"] + after["miss"]["trials"] == 3
+    assert after["hit"]["trials"] == 0 or after["hit"]["success_rate"] == 1.0
+    assert after["miss"]["trials"] == 0 or after["miss"]["success_rate"] == 0.0
+
+
+def test_the_report_splits_later_episodes_by_the_first_episodes_outcome():
+    successes = [[True, True, True], [False, True, False], [False, False, False], [True, False, True]]
+    result = StageResult("t", "s", "test", 3, successes, returns=[[0.0] * 3] * 4, lengths=[[10] * 3] * 4)
+    after = result.as_dict()["after_first_episode"]
+    assert (after["hit"]["trials"], after["hit"]["success_rate"]) == (2, 0.75)   # 3 of the 4 later episodes
+    assert (after["miss"]["trials"], after["miss"]["success_rate"]) == (2, 0.25)  # 1 of 4: searched and found
+    assert 0.0 <= after["miss"]["success_ci95"][0] <= 0.25 <= after["miss"]["success_ci95"][1]
 
 
 def test_rl2_agent_reads_the_augmented_observation():

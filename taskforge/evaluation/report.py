@@ -51,16 +51,19 @@ def evaluate_run(
 
 def format_table(report: dict[str, Any]) -> str:
     """One row per (task, stage); with trials of K > 1 episodes, also the success of episode 1
-    and episode K of the trials (the two ends of the adaptation curve)."""
+    and episode K of the trials (the two ends of the adaptation curve) and the success of
+    episodes 2..K after a first episode that failed (what searching elsewhere gains)."""
     k = report["trial_episodes"]
     header = ["task", "stage", "success", "95% CI"]
-    header += ["episode 1", f"episode {k}"] if k > 1 else []
+    header += ["episode 1", f"episode {k}", "later, after a miss"] if k > 1 else []
     header += ["mean return", "mean length", "episodes"]
 
     def cells(r: dict[str, Any]) -> list[str]:
         row = [r["task"], r["stage"], f"{r['success_rate']:.2f}", f"[{r['success_ci95'][0]:.2f}, {r['success_ci95'][1]:.2f}]"]
         if k > 1:
             row += [f"{r['per_episode'][i]['success_rate']:.2f}" for i in (0, -1)]
+            miss = r["after_first_episode"]["miss"]
+            row.append(f"{miss['success_rate']:.2f} ({miss['trials']} trials)" if miss["trials"] else "-")
         return row + [f"{r['mean_return']:.1f}", f"{r['mean_length']:.0f}", str(r["episodes"])]
 
     lines = [cells(r) for r in report["rows"]]
