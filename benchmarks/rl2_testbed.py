@@ -25,6 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from benchmarks.rl2_ml1 import meta_evaluate  # noqa: E402
+from taskforge.evaluation.report import after_a_miss  # noqa: E402
 from taskforge.run import RunDir, read_jsonl  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -53,16 +54,6 @@ def curve(run_dir: Path) -> list[dict]:
 def first_adapted(points: list[dict]) -> int | None:
     """The first evaluated step at which episode K beat episode 1 by GOAL_GAP."""
     return next((p["step"] for p in points if p["per_episode"][-1] - p["per_episode"][0] >= GOAL_GAP), None)  # never for K = 1
-
-
-def after_a_miss(meta_test: dict | None) -> str:
-    """Success in episodes 2..K of the meta-test trials whose first episode failed: 0 for a
-    deterministic memoryless policy (it repeats the miss), above 0 only for an agent that searches
-    elsewhere (`after_first_episode` in `taskforge eval`'s report)."""
-    after = (meta_test or {}).get("after_first_episode")
-    if not after or not after["miss"]["trials"]:
-        return "-"
-    return f"{after['miss']['success_rate']:.2f} ({after['miss']['trials']} trials)"
 
 
 def plot(runs: dict[str, dict], out: Path) -> Path:
@@ -131,7 +122,7 @@ def main() -> None:
         gap = None if ends["meta_test"] is None else ends["meta_test"][-1] - ends["meta_test"][0]
         rows.append([name, f"{run['steps_done']:,}",
                      *("-" if e is None else f"{e[0]:.2f} -> {e[-1]:.2f}" for e in ends.values()),
-                     "-" if gap is None else f"{gap:+.2f}", after_a_miss(run["meta_test"]),
+                     "-" if gap is None else f"{gap:+.2f}", after_a_miss((run["meta_test"] or {}).get("after_first_episode")),
                      "-" if run["first_adapted_step"] is None else f"{run['first_adapted_step']:,}", f"{run['steps_per_s']:,.0f}"])
     episodes = f"ep 1 -> {TRIAL_EPISODES}"
     print_table(["run", "env steps", f"meta-test {episodes}", f"sampled {episodes}", "gap (mean actions)", "later, after a miss",

@@ -1,7 +1,8 @@
 """The `taskforge` command (console script and `python -m taskforge`).
 
 A thin door in front of `taskforge.cli`: nothing heavy is imported before the `try`, so a Ctrl-C
-at any moment, the first half-second of imports included, ends quietly with exit code 130; a closed pipe ends it quietly too.
+at any moment, the first half-second of imports included, ends quietly with exit code 130; a
+closed pipe ends it quietly too (141).
 """
 
 import os

@@ -49,6 +49,16 @@ def evaluate_run(
     }
 
 
+def after_a_miss(after_first_episode: dict[str, dict] | None) -> str:
+    """The table cell for a row's `after_first_episode`: success of episodes 2..K after a missed
+    first episode and how many trials that is, or "-" where no first episode missed (or the
+    report has no split: trials of one episode)."""
+    miss = (after_first_episode or {}).get("miss")
+    if not miss or not miss["trials"]:
+        return "-"
+    return f"{miss['success_rate']:.2f} ({miss['trials']} trials)"
+
+
 def format_table(report: dict[str, Any]) -> str:
     """One row per (task, stage); with trials of K > 1 episodes, also the success of episode 1
     and episode K of the trials (the two ends of the adaptation curve) and the success of
@@ -62,8 +72,7 @@ def format_table(report: dict[str, Any]) -> str:
         row = [r["task"], r["stage"], f"{r['success_rate']:.2f}", f"[{r['success_ci95'][0]:.2f}, {r['success_ci95'][1]:.2f}]"]
         if k > 1:
             row += [f"{r['per_episode'][i]['success_rate']:.2f}" for i in (0, -1)]
-            miss = r["after_first_episode"]["miss"]
-            row.append(f"{miss['success_rate']:.2f} ({miss['trials']} trials)" if miss["trials"] else "-")
+            row.append(after_a_miss(r.get("after_first_episode")))
         return row + [f"{r['mean_return']:.1f}", f"{r['mean_length']:.0f}", str(r["episodes"])]
 
     lines = [cells(r) for r in report["rows"]]
