@@ -10,11 +10,13 @@ import gymnasium
 import torch
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv, VectorEnv
 
+from taskforge.agents.ray_shards import RestartCallback, ray_vector_env
 from taskforge.agents.sharded import ShardedVectorEnv
 from taskforge.spec.agent import RuntimeSpec
 
 
-def make_vector_env(env_fns: Sequence[Callable[[], gymnasium.Env]], runtime: RuntimeSpec) -> VectorEnv:
+def make_vector_env(env_fns: Sequence[Callable[[], gymnasium.Env]], runtime: RuntimeSpec,
+                    on_restart: RestartCallback | None = None) -> VectorEnv:
     """A gymnasium vector env (core detail #1) with SAME_STEP autoreset, which `PPOAgent.collect`
     requires.
 
@@ -22,9 +24,13 @@ def make_vector_env(env_fns: Sequence[Callable[[], gymnasium.Env]], runtime: Run
     episode's first observation and puts the last one in `infos["final_obs"]` (its info in
     `infos["final_info"]`), which is exactly what truncation bootstrapping needs. NEXT_STEP
     instead spends an extra step with a dummy action and reward 0 on the reset.
+
+    `on_restart` hears of each Ray worker that died and was restarted (`vector: ray` only).
     """
     if runtime.vector == "sharded":
         return ShardedVectorEnv(env_fns, runtime.workers or os.cpu_count() or 1)
+    if runtime.vector == "ray":
+        return ray_vector_env(env_fns, runtime.workers, runtime.ray_address, runtime.ray_max_restarts, on_restart)
     vector_cls = AsyncVectorEnv if runtime.vector == "async" else SyncVectorEnv
     return vector_cls(env_fns, autoreset_mode=AutoresetMode.SAME_STEP)
 

@@ -28,7 +28,7 @@ import signal
 import traceback
 from collections import deque
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, Protocol
 
 import gymnasium
 import numpy as np
@@ -150,11 +150,49 @@ def _blank(like: np.ndarray, n: int) -> np.ndarray:
     return np.zeros((n, *like.shape[1:]), dtype=like.dtype)
 
 
-class ShardedVectorEnv(VectorEnv):
-    """`len(env_fns)` envs in `num_shards` slices (the last in this process, the others in one
-    worker process each), SAME_STEP autoreset."""
+class Channel(Protocol):
+    """How the vector env talks to one slice: send a command, later receive its reply
+    (`("ok", value)` or `("error", traceback)`), in order. A worker process's pipe, the main
+    process's own slice (`_InProcess`) and a Ray actor (`taskforge.agents.ray_shards`) are
+    channels."""
 
-    def __init__(self, env_fns: Sequence[EnvFn], num_shards: int):
+    def send(self, message: tuple[str, Any]) -> None: ...
+
+    def recv(self) -> tuple[str, Any]: ...
+
+
+class _WorkerProcess:
+    """A slice in a worker process of this machine, behind its pipe."""
+
+    def __init__(self, env_fns: Sequence[EnvFn]):
+        ctx = mp.get_context()
+        self.pipe, child = ctx.Pipe()
+        self.process = ctx.Process(target=_worker, args=(child, list(env_fns)), daemon=True)
+        self.process.start()
+        child.close()
+
+    def send(self, message: tuple[str, Any]) -> None:
+        self.pipe.send(message)
+
+    def recv(self) -> tuple[str, Any]:
+        return self.pipe.recv()
+
+    def close(self) -> None:
+        self.process.join(timeout=5)
+        if self.process.is_alive():
+            self.process.terminate()
+
+
+RemoteFactory = Callable[[Sequence[EnvFn], int], Channel]
+"""Builds the channel of a slice stepped outside the main process, from its env constructors
+and the index of its first env."""
+
+
+class ShardedVectorEnv(VectorEnv):
+    """`len(env_fns)` envs in `num_shards` slices (the last in this process, the others each
+    behind a channel from `remote`: by default one worker process each), SAME_STEP autoreset."""
+
+    def __init__(self, env_fns: Sequence[EnvFn], num_shards: int, remote: RemoteFactory | None = None):
         self.num_envs = len(env_fns)
         num_shards = max(1, min(num_shards, self.num_envs))
         probe = env_fns[0]()
@@ -168,16 +206,9 @@ class ShardedVectorEnv(VectorEnv):
         bounds = np.linspace(0, self.num_envs, num_shards + 1).astype(int)
         self.shards = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
         """The envs of each slice, in order; the last one is stepped in this process."""
-        ctx = mp.get_context()
-        self._pipes: list[Any] = []
-        self._procs = []
-        for sl in self.shards[:-1]:  # the workers first: forked before this process builds envs
-            parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, list(env_fns[sl])), daemon=True)
-            proc.start()
-            child.close()
-            self._pipes.append(parent)
-            self._procs.append(proc)
+        remote = remote or (lambda fns, first: _WorkerProcess(fns))
+        # the remote slices first: worker processes fork before this process builds envs
+        self._pipes: list[Channel] = [remote(env_fns[sl], sl.start) for sl in self.shards[:-1]]
         self._pipes.append(_InProcess(env_fns[self.shards[-1]]))
         self.closed = False
 
@@ -225,7 +256,7 @@ class ShardedVectorEnv(VectorEnv):
             self._all([("close", None)] * len(self._pipes))
         except (BrokenPipeError, EOFError, RuntimeError):
             pass
-        for proc in self._procs:
-            proc.join(timeout=5)
-            if proc.is_alive():
-                proc.terminate()
+        for pipe in self._pipes:
+            close = getattr(pipe, "close", None)
+            if close is not None:
+                close()

@@ -6,6 +6,7 @@ implementation details of PPO (Huang et al., 2022).
 
 from __future__ import annotations
 
+import importlib.util
 from typing import Literal
 
 from pydantic import Field, model_validator
@@ -101,17 +102,32 @@ class RL2Spec(StrictModel):
 
 
 class RuntimeSpec(StrictModel):
-    vector: Literal["sharded", "async", "sync"] = "sharded"
+    vector: Literal["sharded", "ray", "async", "sync"] = "sharded"
     """`sharded`: the envs in `workers` slices, the last stepped by the main process and each
-    other by a worker process (one round trip per worker per step); `async`: one process per env
-    (gymnasium AsyncVectorEnv); `sync`: all in-process."""
+    other by a worker process (one round trip per worker per step); `ray`: the same slices, the
+    others in Ray actors across a Ray cluster (optional extra `taskforge[ray]`); `async`: one
+    process per env (gymnasium AsyncVectorEnv); `sync`: all in-process."""
     workers: int | None = Field(default=None, ge=1, le=1024)
-    """Slices of envs for `sharded` (`workers - 1` worker processes plus the main process);
-    default one per CPU core."""
+    """Slices of envs for `sharded` and `ray` (`workers - 1` worker processes or actors plus the
+    main process); default one per CPU core (of the Ray cluster, for `ray`)."""
+    ray_address: str | None = None
+    """`vector: ray`: the cluster to join (`ray.init(address=...)`, e.g. `ray://head:10001` or
+    `auto`); default the `RAY_ADDRESS` environment variable, else a local Ray instance."""
+    ray_max_restarts: int = Field(default=3, ge=0, le=1000)
+    """`vector: ray`: how often each actor may be restarted after its process or node died; its
+    envs are re-created and the run goes on (an event in events.jsonl)."""
     torch_threads: int = Field(default=1, ge=1, le=256)
     """Torch threads while collecting: one, so the env workers keep the other cores."""
     update_threads: int | None = Field(default=None, ge=1, le=256)
     """Torch threads during the PPO update; default every core (the workers wait meanwhile)."""
+
+    @model_validator(mode="after")
+    def _ray_fields_need_ray(self) -> RuntimeSpec:
+        if self.vector != "ray" and self.ray_address is not None:
+            raise ValueError(f"ray_address is only read with vector: ray (got vector: {self.vector})")
+        if self.vector == "ray" and importlib.util.find_spec("ray") is None:
+            raise ValueError("vector: ray needs Ray, an optional extra: pip install 'taskforge[ray]'")
+        return self
 
 
 class AgentSpec(StrictModel):

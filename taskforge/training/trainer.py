@@ -190,8 +190,16 @@ class _Session:
         self.say(f"starting {self.cur.agent.ppo.num_envs} envs at phase {self.scheduler.phase} ({phase.task_file})")
         phases = [(p.task, str(p.task_file)) for p in self.cur.phases]
         fn = partial(_train_env, phases, self.scheduler.phase, self.cur.agent.asymmetric_critic, self.cur.agent)
-        envs = make_vector_env([fn] * self.cur.agent.ppo.num_envs, self.cur.agent.runtime)
+        envs = make_vector_env([fn] * self.cur.agent.ppo.num_envs, self.cur.agent.runtime, self.worker_restarted)
         return envs, CurriculumDriver(self.scheduler, envs)
+
+    def worker_restarted(self, event: dict[str, Any]) -> None:
+        """A Ray worker died and was restarted with fresh envs (`runtime.vector: ray`): logged as
+        an event, said on the console; the run goes on."""
+        self.logger.event({"step": self.agent.global_step, **event})
+        first, last = event["envs"]
+        self.say(f"worker of envs {first}..{last} died ({event['error']}) during {event['during']}; "
+                 f"restarted (restart {event['restart']}), its episodes truncated there")
 
     def run(self, until: int) -> None:
         agent, spec = self.agent, self.cur.spec
