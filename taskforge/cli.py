@@ -17,19 +17,21 @@ EXIT_USAGE = 2
 
 
 def _kind_of(path: Path) -> str:
-    """Task, agent or curriculum, from the top-level keys (a variant's merged with its base's;
+    """Task, agent, curriculum or sweep, from the top-level keys (a variant's merged with its base's;
     falling back to the folder name)."""
     data = read_yaml_with_base(path)
+    if "variants" in data:
+        return "sweep"
     if "phases" in data:
         return "curriculum"
     if {"stages", "backend"} & data.keys():
         return "task"
     if {"ppo", "policy", "algo", "rl2"} & data.keys():
         return "agent"
-    for kind, folder in (("task", "tasks"), ("agent", "agents"), ("curriculum", "curricula")):
+    for kind, folder in (("task", "tasks"), ("agent", "agents"), ("curriculum", "curricula"), ("sweep", "sweeps")):
         if folder in path.parts:
             return kind
-    raise SpecError.single(path, "", "cannot tell the kind of file; expected a task (stages), agent (ppo) or curriculum (phases)")
+    raise SpecError.single(path, "", "cannot tell the kind of file; expected a task (stages), agent (ppo), curriculum (phases) or sweep (variants)")
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
@@ -46,6 +48,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
                 lines = task_summary(check_task_file(path))
             elif kind == "agent":
                 lines = agent_summary(load_agent_spec(path))
+            elif kind == "sweep":
+                from taskforge.sweep import plan_sweep
+
+                plan = plan_sweep(path)
+                lines = [f"  {len(plan.spec.variants)} variants x {len(plan.spec.seeds)} seeds = {len(plan.trials)} trials; "
+                         f"tested under: {', '.join(c.name for c in plan.conditions)} (stage {plan.stage})"]
             else:
                 curriculum = load_curriculum(path)
                 # One policy for every phase: their observation/action shapes must agree.
@@ -124,6 +132,27 @@ def cmd_train(args: argparse.Namespace) -> int:
                 print(f"  {row['task']}: {row['success_rate']:.2f} ({row['successes']}/{row['episodes']})")
     else:
         print(f"paused at step {step:,} of {total:,}: {run} (continue with --resume)")
+    return 0
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    from taskforge.sweep import SweepInterrupted, plan_sweep, run_sweep
+
+    if args.dry_run:
+        plan = plan_sweep(args.sweep, args.out)
+        for trial in plan.trials:
+            print(f"{trial.variant}, seed {trial.seed}: {trial.run_dir}")
+        print(f"{len(plan.trials)} trials; tested under: {', '.join(c.name for c in plan.conditions)}")
+        return 0
+    try:
+        out = run_sweep(args.sweep, out=args.out, address=args.address, resume=args.resume)
+    except SweepInterrupted as exc:
+        print(str(exc), file=sys.stderr)
+        return 130
+    except RuntimeError as exc:  # trials failed; the others' results are written
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    print((out / "table.md").read_text())
     return 0
 
 
@@ -244,9 +273,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="taskforge", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("validate", help="check task / agent / curriculum files and summarise them")
+    p = sub.add_parser("validate", help="check task / agent / curriculum / sweep files and summarise them")
     p.add_argument("files", nargs="+")
-    p.add_argument("--kind", choices=["task", "agent", "curriculum"], help="default: guessed from the file")
+    p.add_argument("--kind", choices=["task", "agent", "curriculum", "sweep"], help="default: guessed from the file")
     p.set_defaults(func=cmd_validate)
 
     p = sub.add_parser("tasks", help="list task files and their stages")
@@ -264,6 +293,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "schedule still spans --steps; continue later with --resume")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (e.g. in logs)")
     p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("sweep", help="train every variant x seed of a sweep file (Ray) and table them under its test conditions")
+    p.add_argument("sweep", metavar="SWEEP.yaml")
+    p.add_argument("--address", help="a Ray cluster to run on (default: RAY_ADDRESS, else a local Ray instance on this machine)")
+    p.add_argument("--out", help="the sweep's folder (default: runs/sweeps/<sweep name>)")
+    p.add_argument("--resume", action="store_true", help="skip finished trials, resume unfinished ones from their checkpoints")
+    p.add_argument("--dry-run", action="store_true", help="check the sweep file and list its trials; train nothing")
+    p.set_defaults(func=cmd_sweep)
 
     p = sub.add_parser("demos", help="record scripted demonstrations of a task's stage")
     p.add_argument("task", metavar="TASK.yaml")

@@ -6,6 +6,7 @@ and read, and how a run's agent is rebuilt.
       checkpoint.pt    the latest state (agent, scheduler): what `--resume` continues from
       final.pt         the policy at the end of the budget (no optimizer state, no scheduler)
       final_eval.json  the evaluation of the final policy that `taskforge train` prints
+      sweep_eval.json  in a sweep's trial: the final policy under each of the sweep's test conditions
       metrics.jsonl    one record per PPO update; events.jsonl: promotions, warnings
       demos.npz        generated demonstrations; dagger.npz: DAgger's labelled states
       tensorboard/     the same numbers for watching live
@@ -51,6 +52,7 @@ class RunDir:
     checkpoint = property(lambda self: self.path / "checkpoint.pt")
     final = property(lambda self: self.path / "final.pt")
     final_eval = property(lambda self: self.path / "final_eval.json")
+    sweep_eval = property(lambda self: self.path / "sweep_eval.json")
     metrics = property(lambda self: self.path / "metrics.jsonl")
     events = property(lambda self: self.path / "events.jsonl")
     demos = property(lambda self: self.path / "demos.npz")

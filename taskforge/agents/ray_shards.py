@@ -49,12 +49,13 @@ def import_ray() -> Any:
     return ray
 
 
-def connect(address: str | None) -> Any:
+def connect(address: str | None, log_to_driver: bool = False) -> Any:
     """Join the Ray cluster at `address` (or `RAY_ADDRESS`), or start a local instance on this
-    machine's cores; a process already connected stays connected."""
+    machine's cores; a process already connected stays connected. `log_to_driver`: print what
+    the workers print (a sweep's trials report their progress so); env workers stay quiet."""
     ray = import_ray()
     if not ray.is_initialized():
-        ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        ray.init(address=address, include_dashboard=False, log_to_driver=log_to_driver, configure_logging=False)
     return ray
 
 

@@ -10,6 +10,7 @@ from taskforge.spec.errors import SpecError, SpecIssue, did_you_mean, expected_o
 from taskforge.spec.loader import (
     load_agent_spec,
     load_curriculum_spec,
+    load_sweep_spec,
     load_task_spec,
     read_task_yaml,
     read_yaml,
@@ -17,6 +18,7 @@ from taskforge.spec.loader import (
     resolve_relative,
     validate,
 )
+from taskforge.spec.sweep import SweepSpec
 from taskforge.spec.task import (
     ConditionSpec,
     LatencySpec,
@@ -45,12 +47,14 @@ __all__ = [
     "SpecIssue",
     "StageSpec",
     "StrictModel",
+    "SweepSpec",
     "TaskSpec",
     "did_you_mean",
     "expected_one_of",
     "format_path",
     "load_agent_spec",
     "load_curriculum_spec",
+    "load_sweep_spec",
     "load_task_spec",
     "read_task_yaml",
     "read_yaml",

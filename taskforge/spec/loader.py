@@ -15,6 +15,7 @@ from taskforge.spec.agent import AgentSpec
 from taskforge.spec.backends import BACKEND_TYPES
 from taskforge.spec.curriculum import CurriculumSpec
 from taskforge.spec.errors import SpecError, issues_from_validation
+from taskforge.spec.sweep import SweepSpec
 from taskforge.spec.task import TaskSpec
 
 M = TypeVar("M", bound=BaseModel)
@@ -53,6 +54,7 @@ def validate(model: type[M], data: dict[str, Any], file: str | Path) -> M:
 # Fields that hold paths (relative to the file that writes them); "*" stands for every item of a list.
 _TASK_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("backend", "robot_model"),)
 _CURRICULUM_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("agent",), ("phases", "*", "task"), ("warm_start", "demos"))
+_SWEEP_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("curriculum",),)
 
 
 def read_yaml_with_base(
@@ -129,6 +131,10 @@ def load_agent_spec(path: str | Path) -> AgentSpec:
 
 def load_curriculum_spec(path: str | Path) -> CurriculumSpec:
     return validate(CurriculumSpec, read_yaml_with_base(path, _CURRICULUM_PATH_FIELDS), path)
+
+
+def load_sweep_spec(path: str | Path) -> SweepSpec:
+    return validate(SweepSpec, read_yaml_with_base(path, _SWEEP_PATH_FIELDS), path)
 
 
 def resolve_relative(base_file: str | Path, ref: str) -> Path:
