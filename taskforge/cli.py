@@ -364,8 +364,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", help="write every step as CSV here")
     p.set_defaults(func=cmd_inspect)
 
-    p = sub.add_parser("schema", help="JSON Schema of task, agent or curriculum files, for editors")
-    p.add_argument("kind", choices=["task", "agent", "curriculum"])
+    p = sub.add_parser("schema", help="JSON Schema of task, agent, curriculum or sweep files, for editors")
+    p.add_argument("kind", choices=["task", "agent", "curriculum", "sweep"])
     p.add_argument("--out", help="write it here instead of printing it")
     p.set_defaults(func=cmd_schema)
     return parser

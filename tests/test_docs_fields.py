@@ -1,5 +1,5 @@
 """The authoring guide and `taskforge schema` come from the same pydantic models: every field of a
-task, agent or curriculum file has a row in docs/authoring.md, and the exported JSON Schema is
+task, agent, curriculum or sweep file has a row in docs/authoring.md, and the exported JSON Schema is
 the models' own, so the guide, the schema and the loader cannot drift apart."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 from pydantic import BaseModel
 
 from taskforge.cli import main
-from taskforge.spec import AgentSpec, CurriculumSpec, TaskSpec
+from taskforge.spec import AgentSpec, CurriculumSpec, SweepSpec, TaskSpec
 from tests.conftest import ROOT
 
 GUIDE = (ROOT / "docs/authoring.md").read_text()
@@ -47,13 +47,14 @@ def _documented(name: str, parent: str | None) -> bool:
     return any(re.search(rf"\b{re.escape(name)}\b\s*:", row) for row in parent_rows)
 
 
-@pytest.mark.parametrize("root", [TaskSpec, AgentSpec, CurriculumSpec], ids=lambda m: m.__name__)
+@pytest.mark.parametrize("root", [TaskSpec, AgentSpec, CurriculumSpec, SweepSpec], ids=lambda m: m.__name__)
 def test_every_field_has_a_row_in_the_authoring_guide(root):
     missing = [f"{model.__name__}.{name}" for model, name, parent in _fields(root) if not _documented(name, parent)]
     assert not missing, f"fields without a row in docs/authoring.md: {', '.join(missing)}"
 
 
-@pytest.mark.parametrize("kind,model", [("task", TaskSpec), ("agent", AgentSpec), ("curriculum", CurriculumSpec)])
+@pytest.mark.parametrize("kind,model", [("task", TaskSpec), ("agent", AgentSpec), ("curriculum", CurriculumSpec),
+                                        ("sweep", SweepSpec)])
 def test_schema_prints_the_models_json_schema(kind, model, capsys):
     assert main(["schema", kind]) == 0
     schema = json.loads(capsys.readouterr().out)

@@ -1,4 +1,4 @@
-"""JSON Schema of task, agent and curriculum files, from the same pydantic models the loader
+"""JSON Schema of task, agent, curriculum and sweep files, from the same pydantic models the loader
 validates with, so a YAML editor (e.g. VS Code's YAML extension, with `# yaml-language-server:
 $schema=task.schema.json` at the top of a file) completes and checks fields exactly as
 `taskforge validate` would. Registry names (reward terms, physics targets, features) are checked
@@ -12,10 +12,11 @@ from pydantic import BaseModel
 
 from taskforge.spec.agent import AgentSpec
 from taskforge.spec.curriculum import CurriculumSpec
+from taskforge.spec.sweep import SweepSpec
 from taskforge.spec.task import TaskSpec
 
-Kind = Literal["task", "agent", "curriculum"]
-MODELS: dict[str, type[BaseModel]] = {"task": TaskSpec, "agent": AgentSpec, "curriculum": CurriculumSpec}
+Kind = Literal["task", "agent", "curriculum", "sweep"]
+MODELS: dict[str, type[BaseModel]] = {"task": TaskSpec, "agent": AgentSpec, "curriculum": CurriculumSpec, "sweep": SweepSpec}
 
 
 def json_schema(kind: Kind) -> dict[str, Any]:
