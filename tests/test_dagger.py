@@ -150,3 +150,33 @@ def test_a_warm_started_run_keeps_its_success_when_ppo_takes_over(tmp_path):
     resumed = [r for r in read_jsonl(run / "metrics.jsonl") if r["step"] > end]
     assert resumed and all(r["actor_trained"] == 1.0 and r["bc_weight"] > 0 for r in resumed if "actor_trained" in r)
     assert sum("expert_steps" in r for r in read_jsonl(run / "metrics.jsonl")) == 1
+
+
+def test_a_recurrent_student_is_warm_started_on_whole_episodes(tmp_path):
+    """The same warm start with an LSTM policy: DAgger's rollouts carry its state and come back
+    env by env, so each labelled episode lies contiguous (150-step `reach` episodes start every
+    150 rows), cloning on whole episodes makes it reach the puck right after pretraining, and a
+    resumed run reinstalls the BC term from the saved episodes."""
+    agent = {"name": "small-lstm", "policy": {"type": "lstm", "recurrent_size": 64, "hidden_sizes": [64]},
+             "ppo": {"num_envs": 4, "rollout_steps": 300, "num_minibatches": 4, "update_epochs": 2, "bptt_length": 50},
+             "runtime": {"vector": "sync", "update_threads": 1}}
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
+    doc = {"name": "warm-reach-lstm", "agent": "agent.yaml", "total_steps": 6_000,
+           "phases": [{"task": str(PICK_PLACE), "stages": ["reach"]}],
+           "evaluation": {"every_steps": 2_400, "episodes": 10, "split": "test", "stop_on_success": True},
+           "checkpoint": {"every_steps": 100_000},
+           "warm_start": {"generate_episodes": 12, "stage": "reach", "bc_epochs": 30,
+                          "dagger": {"rounds": 1, "steps_per_round": 1_200, "epochs": 10},
+                          "fine_tune": {"critic_warmup_steps": 1_200}}}
+    cur = tmp_path / "c.yaml"
+    cur.write_text(yaml.safe_dump(doc))
+    run = train(cur, run_dir=tmp_path / "run", progress=False)
+    first = read_jsonl(run / "metrics.jsonl")[0]
+    assert first["eval_success_rate"] >= 0.7 and first["bc_action_mse"] < first["bc_action_mse_before"], first
+    with np.load(run / "dagger.npz") as labelled:
+        starts = labelled["episode_starts"]
+    assert len(starts) == 1_200 and np.flatnonzero(starts).tolist() == [0, 150, 300, 450, 600, 750, 900, 1050]
+    end = read_jsonl(run / "metrics.jsonl")[-1]["step"]
+    train(cur, run_dir=run, steps=end + 1_200, resume=True, progress=False)
+    resumed = [r for r in read_jsonl(run / "metrics.jsonl") if r["step"] > end and "bc_weight" in r]
+    assert resumed and all(r["bc_weight"] > 0 and np.isfinite(r["bc_loss"]) for r in resumed)

@@ -23,9 +23,10 @@ Choices, and why:
 * **Asymmetric critic**: it reads `concat(obs, privileged)`; demos recorded by `taskforge demos`
   carry `info["privileged"]` (zero-padded to the agent's width, like the env does). Without it,
   or with a wider vector than the agent's, the critic is not pretrained (PPO fits it as usual).
-* **Recurrent (LSTM) policies are not supported**: behaviour cloning would have to run whole
-  episodes as sequences, for the pretraining and the regulariser alike. `pretrain` and
-  `set_demo_regularizer` raise a `ValueError` for them.
+* **Recurrent (LSTM, GRU) policies** are cloned on whole demo episodes, each from a fresh state,
+  as they will act (`agents/sequences.py`): a minibatch is about `batch_size` steps of whole
+  episodes, and the losses are means over the real (unpadded) steps. The same rows serve the
+  exploration fit and PPO's demonstration term.
 """
 
 from __future__ import annotations
@@ -41,11 +42,7 @@ from taskforge.agents.actions import SquashGaussian
 from taskforge.agents.normalization import RewardScaler
 from taskforge.agents.ppo import PPOAgent
 from taskforge.agents.runtime import torch_threads, update_threads
-
-
-def check_supported(agent: PPOAgent) -> None:
-    if agent.policy.recurrent:
-        raise ValueError("warm start from demonstrations supports MLP policies only (policy.type: mlp), not an LSTM or GRU")
+from taskforge.agents.sequences import DemoRows, columns_per_batch, demo_rows
 
 
 def returns_to_go(rewards: np.ndarray, episode_starts: np.ndarray, truncated: np.ndarray, gamma: float) -> np.ndarray:
@@ -91,6 +88,7 @@ def pretrain(
     privileged: np.ndarray | None = None,
     update_normalizer: bool = True,
     progress: bool = False,
+    episode_starts: np.ndarray | None = None,
 ) -> dict[str, float]:
     """Behaviour cloning of the actor (MSE of the mean action) and, given `returns_to_go` (in
     the critic's units, see `scaled_rewards`), value regression of the critic.
@@ -100,8 +98,8 @@ def pretrain(
     already hold). Shuffles with the agent's generator, so a seed fixes the result. Returns
     `bc_action_mse_before/after` and, when the critic was trained, `bc_value_mse_before/after`,
     plus `bc_samples`, `bc_epochs`. `progress` shows a bar over the epochs (minutes on 2 cores).
+    A recurrent policy needs `episode_starts` (where each demo episode begins; module doc).
     """
-    check_supported(agent)
     obs = np.asarray(observations, dtype=np.float32)
     act = torch.as_tensor(np.asarray(actions, dtype=np.float32))
     if obs.ndim != 2 or obs.shape[1] != agent.obs_normalizer.rms.mean.shape[0]:
@@ -109,47 +107,64 @@ def pretrain(
     if act.shape != (len(obs), agent.action_space.shape[0]):
         raise ValueError(f"demo actions have shape {tuple(act.shape)}, expected ({len(obs)}, {agent.action_space.shape[0]})")
     policy = agent.policy
+    rows = _rows(agent, len(obs), episode_starts)
     obs_n = agent.obs_normalizer(obs, update=update_normalizer)  # PPO will see this scale too (module doc)
     critic_in = _critic_input(agent, obs_n, privileged) if returns_to_go is not None else None
     targets = None if critic_in is None else torch.as_tensor(np.asarray(returns_to_go), dtype=torch.float32)
 
-    def action_error(idx: torch.Tensor | slice) -> torch.Tensor:
-        dist, _ = policy.distribution(obs_n[idx][None], None, torch.zeros((1, len(obs_n[idx])), dtype=torch.bool))
-        mean = dist.mean[0]
-        predicted = policy.actions.to_env(mean) if isinstance(policy.actions, SquashGaussian) else mean
-        return ((predicted - act[idx]) ** 2).mean()
+    def action_error(batch: DemoRows) -> torch.Tensor:
+        predicted = mean_actions(agent, obs_n, batch)
+        return ((predicted - act[batch.index]) ** 2).mean(dim=-1)[batch.mask].mean()
 
-    def value_error(idx: torch.Tensor | slice) -> torch.Tensor:
-        values, _ = policy.value(critic_in[idx][None], None, torch.zeros((1, len(critic_in[idx])), dtype=torch.bool))
-        return ((values[0] - targets[idx]) ** 2).mean()
+    def value_error(batch: DemoRows) -> torch.Tensor:
+        values, _ = policy.value(critic_in[batch.index], policy.initial_state(batch.width), batch.starts)
+        return ((values - targets[batch.index]) ** 2)[batch.mask].mean()
 
     params = [p for name, p in policy.named_parameters() if name != "actor_logstd"]
     optimizer = torch.optim.Adam(params, lr=learning_rate, eps=1e-5)
     metrics: dict[str, float] = {"bc_samples": float(len(obs)), "bc_epochs": float(epochs)}
+    per_batch = columns_per_batch(rows, batch_size)
     with torch_threads(update_threads(agent.spec.runtime)):
         with torch.no_grad():
-            metrics["bc_action_mse_before"] = action_error(slice(None)).item()
+            metrics["bc_action_mse_before"] = action_error(rows).item()
             if targets is not None:
-                metrics["bc_value_mse_before"] = value_error(slice(None)).item()
+                metrics["bc_value_mse_before"] = value_error(rows).item()
         for _ in tqdm(range(epochs), desc="behaviour cloning", unit="epoch", disable=not progress, leave=False,
                       file=sys.stderr, dynamic_ncols=True):
-            for idx in torch.randperm(len(obs), generator=agent.generator).split(batch_size):
-                loss = action_error(idx)
+            for columns in torch.randperm(rows.width, generator=agent.generator).split(per_batch):
+                batch = rows.take(columns)
+                loss = action_error(batch)
                 if targets is not None:
-                    loss = loss + value_error(idx)  # separate networks: the sum trains each on its own loss
+                    loss = loss + value_error(batch)  # separate networks: the sum trains each on its own loss
                 optimizer.zero_grad()
                 loss.backward()
                 nn.utils.clip_grad_norm_(params, agent.spec.ppo.max_grad_norm)
                 optimizer.step()
         with torch.no_grad():
-            metrics["bc_action_mse"] = action_error(slice(None)).item()
+            metrics["bc_action_mse"] = action_error(rows).item()
             if targets is not None:
-                metrics["bc_value_mse"] = value_error(slice(None)).item()
+                metrics["bc_value_mse"] = value_error(rows).item()
     return metrics
 
 
+def mean_actions(agent: PPOAgent, obs_n: torch.Tensor, rows: DemoRows) -> torch.Tensor:
+    """The policy's mean action at every step of `rows` (`[T, B, action]`), in env units: as it
+    is for `clip` (demo actions lie inside the box, so the unclipped mean is pulled inside too),
+    through `tanh` for `squash`. Each row runs from a fresh recurrent state."""
+    policy = agent.policy
+    dist, _ = policy.distribution(obs_n[rows.index], policy.initial_state(rows.width), rows.starts)
+    return policy.actions.to_env(dist.mean) if isinstance(policy.actions, SquashGaussian) else dist.mean
+
+
+def _rows(agent: PPOAgent, n: int, episode_starts: np.ndarray | None) -> DemoRows:
+    if agent.policy.recurrent and episode_starts is None:
+        raise ValueError("a recurrent policy is cloned on whole episodes: pass the demos' episode_starts")
+    return demo_rows(np.ones(n, dtype=bool) if episode_starts is None else episode_starts, agent.policy.recurrent)
+
+
 def fit_exploration_std(
-    agent: PPOAgent, observations: np.ndarray, actions: np.ndarray, scale: float, low: float, high: float
+    agent: PPOAgent, observations: np.ndarray, actions: np.ndarray, scale: float, low: float, high: float,
+    episode_starts: np.ndarray | None = None,
 ) -> np.ndarray:
     """Size PPO's exploration noise from the pretrained policy instead of the preset's
     `init_log_std`: per action dimension, `scale` times the root-mean-square error of the policy's
@@ -160,14 +175,14 @@ def fit_exploration_std(
     (measured: held-out success 0.25 -> 0.05 within 20k steps). The cloning error is how far the
     student already is from its teacher, so noise of that size explores around the demonstrated
     behaviour without drowning it."""
-    check_supported(agent)
     policy = agent.policy
     obs_n = agent.obs_normalizer(np.asarray(observations, dtype=np.float32), update=False)
+    rows = _rows(agent, len(obs_n), episode_starts)
     with torch.no_grad():
-        dist, _ = policy.distribution(obs_n[None], None, torch.zeros((1, len(obs_n)), dtype=torch.bool))
-        mean = dist.mean[0]
-        predicted = policy.actions.to_env(mean)  # the action the env would get: clipped or squashed
-        rmse = ((predicted - torch.as_tensor(np.asarray(actions, dtype=np.float32))) ** 2).mean(dim=0).sqrt()
+        # the action the env would get: clipped or squashed
+        predicted = policy.actions.to_env(policy.distribution(obs_n[rows.index], policy.initial_state(rows.width), rows.starts)[0].mean)
+        error = predicted - torch.as_tensor(np.asarray(actions, dtype=np.float32))[rows.index]
+        rmse = (error[rows.mask] ** 2).mean(dim=0).sqrt()
         std = (scale * rmse).clamp(low, high)
         policy.actor_logstd.copy_(std.log())
     return std.numpy()

@@ -30,6 +30,7 @@ from torch import nn
 from taskforge.agents.normalization import ObservationNormalizer, RewardScaler
 from taskforge.agents.policies import ActorCritic, RecurrentState
 from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
+from taskforge.agents.sequences import DemoRows, columns_per_batch, demo_rows
 from taskforge.agents.storage import Minibatch, RolloutBuffer
 from taskforge.spec.agent import AgentSpec, PPOSpec
 
@@ -105,7 +106,10 @@ class DemoRegularizer:
     raw_actions: torch.Tensor
     weight: float
     decay: float
-    batch_size: int
+    rows: DemoRows
+    """The demo steps as the policy reads them (single steps, or episodes for a recurrent one)."""
+    columns: int
+    """Rows drawn per minibatch: about `batch_size` demo steps."""
 
     def weight_at(self, update: int) -> float:
         return self.weight * self.decay**update
@@ -187,21 +191,26 @@ class PPOAgent:
         """Rollouts no longer update the observation normaliser (`freeze_observation_statistics`)."""
 
     def set_demo_regularizer(
-        self, observations: np.ndarray, actions: np.ndarray, weight: float, decay: float, batch_size: int | None = None
+        self, observations: np.ndarray, actions: np.ndarray, weight: float, decay: float, batch_size: int | None = None,
+        episode_starts: np.ndarray | None = None,
     ) -> None:
         """Add `weight * decay**k * -log pi(a_demo | s_demo)` to the loss of every minibatch of
-        PPO update k (counting from 0 with `num_updates`), averaged over `batch_size` demo steps
-        drawn afresh per minibatch (default: PPO's minibatch size). DAPG's behaviour-cloning
+        PPO update k (counting from 0 with `num_updates`), averaged over about `batch_size` demo
+        steps drawn afresh per minibatch (default: PPO's minibatch size). DAPG's behaviour-cloning
         term (Rajeswaran et al., 2018) with their schedule, without their advantage weighting:
         it keeps the policy near the demonstrations early and fades as PPO takes over.
         `actions` are env actions; observations are normalised with the current statistics at
-        every update. MLP policies only."""
-        if self.policy.recurrent:
-            raise ValueError("the demonstration regulariser supports MLP policies only, not an LSTM or GRU")
+        every update. A recurrent policy reads whole demo episodes (`episode_starts`), each from
+        a fresh state, as it was cloned (`agents/sequences.py`)."""
+        if self.policy.recurrent and episode_starts is None:
+            raise ValueError("a recurrent policy's demonstration term runs whole episodes: pass the demos' episode_starts")
         ppo = self.spec.ppo
         batch = batch_size or ppo.num_envs * ppo.rollout_steps // ppo.num_minibatches
         raw = self.policy.actions.from_env(torch.as_tensor(np.asarray(actions, dtype=np.float32)))
-        self.demo_regularizer = DemoRegularizer(np.asarray(observations, dtype=np.float32), raw, weight, decay, min(batch, len(raw)))
+        starts = np.ones(len(raw), dtype=bool) if episode_starts is None else episode_starts
+        rows = demo_rows(starts, self.policy.recurrent)
+        self.demo_regularizer = DemoRegularizer(np.asarray(observations, dtype=np.float32), raw, weight, decay,
+                                                rows, min(columns_per_batch(rows, batch), rows.width))
 
     def warm_up_critic(self, updates: int) -> None:
         """Train only the critic for the next `updates` PPO updates. After a warm start the actor
@@ -356,9 +365,9 @@ class PPOAgent:
                 loss = ppo_loss(self.policy, mb, ppo, self.generator, train_actor)
                 total = loss.total
                 if demos is not None:  # DAPG's decaying behaviour-cloning term (see set_demo_regularizer)
-                    idx = torch.randint(len(demo_obs), (demos.batch_size,), generator=self.generator)
-                    dist, _ = self.policy.distribution(demo_obs[idx][None], None, torch.zeros((1, len(idx)), dtype=torch.bool))
-                    bc_loss = -self.policy.actions.log_prob(dist, demos.raw_actions[idx][None]).mean()
+                    rows = demos.rows.take(torch.randint(demos.rows.width, (demos.columns,), generator=self.generator))
+                    dist, _ = self.policy.distribution(demo_obs[rows.index], self.policy.initial_state(rows.width), rows.starts)
+                    bc_loss = -self.policy.actions.log_prob(dist, demos.raw_actions[rows.index])[rows.mask].mean()
                     total = total + bc_weight * bc_loss
                     totals["bc_loss"] = totals.get("bc_loss", 0.0) + bc_loss.item()
                 self.optimizer.zero_grad()

@@ -148,11 +148,11 @@ def hidden_goal_warnings(path: Path, agent: AgentSpec, phases: list[CurriculumPh
 def _check_warm_start(
     spec: CurriculumSpec, path: Path, agent: AgentSpec, phases: list[CurriculumPhase], issues: list[SpecIssue]
 ) -> Path | None:
-    """The warm start's phase, stage, demos file and policy type; returns the demos path."""
+    """The warm start's phase, stage, demos file and agent; returns the demos path."""
     ws = spec.warm_start
     assert ws is not None
-    if agent.policy.type != "mlp":
-        msg = f"warm start supports MLP policies only; the agent's policy.type is '{agent.policy.type}'"
+    if agent.algo == "rl2":
+        msg = "a warm start clones single episodes; an RL² agent reads trials (previous action and reward inputs), which demos do not have"
         issues.append(SpecIssue(str(path), "warm_start", msg))
     if ws.phase != "all" and ws.phase >= len(phases):
         msg = f"no phase {ws.phase}; expected an index below {len(phases)} (phases counts from 0) or 'all'"

@@ -144,7 +144,7 @@ class FineTuneSpec(StrictModel):
 
 class WarmStartSpec(StrictModel):
     """Pretrain the agent on demonstrations before the curriculum starts, then keep a decaying
-    BC term in PPO's loss (MLP policies only)."""
+    BC term in PPO's loss (MLP, LSTM or GRU policies; not RL²)."""
 
     demos: str | None = None
     """A demos file (`taskforge demos`), relative to the curriculum file."""

@@ -20,12 +20,37 @@ from taskforge.agents import PPOAgent
 from taskforge.demos.labels import EXPERT_ACTION
 
 
+@dataclass(frozen=True)
+class Labelled:
+    """States with the expert's action for each, and where their episodes begin (what a
+    recurrent student is cloned on; an MLP ignores it)."""
+
+    observations: np.ndarray
+    actions: np.ndarray
+    episode_starts: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.observations)
+
+    def extend(self, more: Labelled) -> Labelled:
+        return Labelled(*(np.concatenate([a, b]) for a, b in zip(self.fields(), more.fields())))
+
+    def fields(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.observations, self.actions, self.episode_starts
+
+    def after(self, n: int) -> Labelled:
+        """Everything past the first `n` entries (DAgger's part of an aggregate with the demos)."""
+        return Labelled(*(x[n:] for x in self.fields()))
+
+
 @dataclass
 class DaggerRound:
     """What one round collected: labelled states and the student's episodes that finished."""
 
     observations: np.ndarray
     expert_actions: np.ndarray
+    episode_starts: np.ndarray
+    """Where each env's episodes begin, in the order of `observations` (see `student_rollout`)."""
     episode_successes: list[bool] = field(default_factory=list)
 
     @property
@@ -34,41 +59,48 @@ class DaggerRound:
 
 
 def student_rollout(agent: PPOAgent, envs: VectorEnv, steps: int, seed: int) -> DaggerRound:
-    """Run the student (sampled actions, frozen normaliser) for at least `steps` env steps in
-    all envs together; return every observation it acted on, with the expert's label for it."""
+    """Run the student (sampled actions, frozen normaliser; a recurrent one with its state carried
+    through each episode) for at least `steps` env steps in all envs together; return every
+    observation it acted on, with the expert's label for it.
+
+    Order: step by step (all envs at step 0, then step 1, ...) for an MLP, which reads each step
+    alone; env by env for a recurrent policy, so each env's episodes lie contiguous and are
+    cloned as sequences (`agents/sequences.py`)."""
     obs, infos = envs.reset(seed=seed)
-    observations, labels, successes = [], [], []
+    state, starts = agent.initial_state(envs.num_envs), np.ones(envs.num_envs, dtype=bool)
+    observations, labels, start_flags, successes = [], [], [], []
     for _ in range(-(-steps // envs.num_envs)):  # ceil: every env steps the same number of times
         observations.append(obs)
         labels.append(np.stack(infos[EXPERT_ACTION]))
-        actions, _ = agent.act(obs, deterministic=False)
+        start_flags.append(starts)
+        actions, state = agent.act(obs, state, starts, deterministic=False)
         obs, _, terminated, truncated, infos = envs.step(actions)
-        ended = terminated | truncated
-        if ended.any():  # SAME_STEP autoreset: the finished episodes' last info is in final_info
-            successes += [bool(s) for s in infos["final_info"]["episode_success"][ended]]
-    return DaggerRound(np.concatenate(observations), np.concatenate(labels), successes)
+        starts = terminated | truncated
+        if starts.any():  # SAME_STEP autoreset: the finished episodes' last info is in final_info
+            successes += [bool(s) for s in infos["final_info"]["episode_success"][starts]]
+    by_env = (lambda x: np.swapaxes(np.stack(x), 0, 1).reshape(-1, *x[0].shape[1:])) if agent.policy.recurrent \
+        else np.concatenate
+    return DaggerRound(by_env(observations), by_env(labels), by_env(start_flags), successes)
 
 
 def dagger(
     agent: PPOAgent,
     envs: VectorEnv,
-    demo_observations: np.ndarray,
-    demo_actions: np.ndarray,
+    demos: Labelled,
     rounds: int,
     steps_per_round: int,
-    refit: Callable[[np.ndarray, np.ndarray], dict[str, float]],
+    refit: Callable[[Labelled], dict[str, float]],
     seed: int,
     on_round: Callable[[int, DaggerRound, dict[str, float]], None] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+) -> Labelled:
     """`rounds` DAgger rounds after the demos (round 0, assumed already fitted): each rolls out
     the current student, aggregates its labelled states with all earlier data and calls
-    `refit(observations, actions)` on the aggregate. Returns the aggregate, for PPO's BC term."""
-    observations, actions = demo_observations, demo_actions
+    `refit(aggregate)`. Returns the aggregate, for PPO's BC term."""
+    aggregate = demos
     for k in range(1, rounds + 1):
         batch = student_rollout(agent, envs, steps_per_round, seed=seed + 1000 * k)
-        observations = np.concatenate([observations, batch.observations])
-        actions = np.concatenate([actions, batch.expert_actions])
-        metrics = refit(observations, actions)
+        aggregate = aggregate.extend(Labelled(batch.observations, batch.expert_actions, batch.episode_starts))
+        metrics = refit(aggregate)
         if on_round is not None:
             on_round(k, batch, metrics)
-    return observations, actions
+    return aggregate

@@ -34,7 +34,7 @@ from taskforge.envs import ResolvedCurriculum, TaskEnv
 from taskforge.run import RunDir
 from taskforge.spec import SpecError
 from taskforge.spec.curriculum import WarmStartSpec
-from taskforge.training.dagger import DaggerRound, dagger
+from taskforge.training.dagger import DaggerRound, Labelled, dagger
 
 
 @dataclass
@@ -43,8 +43,8 @@ class WarmStart:
     generated: bool
     metrics: dict[str, Any] | None
     """Pretraining metrics (None when resuming: the checkpoint already holds the result)."""
-    labelled: tuple[np.ndarray, np.ndarray] | None = None
-    """DAgger's aggregate beyond the demos (observations, expert actions), kept for `--resume`."""
+    labelled: Labelled | None = None
+    """DAgger's aggregate beyond the demos, kept for `--resume`."""
 
     def record(self, run: RunDir, logger) -> None:
         """After the run directory exists: keep generated demos and DAgger's labels for
@@ -52,8 +52,8 @@ class WarmStart:
         if self.generated and (self.metrics is not None or not run.demos.exists()):
             demo_io.save(self.demos, run.demos)
         if self.labelled is not None and (self.metrics is not None or not run.dagger.exists()):
-            obs, act = self.labelled
-            atomic_write(run.dagger, lambda f: np.savez_compressed(f, observations=obs, actions=act))
+            obs, act, starts = self.labelled.fields()
+            atomic_write(run.dagger, lambda f: np.savez_compressed(f, observations=obs, actions=act, episode_starts=starts))
         if self.metrics is not None:
             logger.log(int(self.metrics["expert_steps"]), self.metrics)
 
@@ -72,9 +72,8 @@ def prepare_warm_start(
 
     if resumed:  # the checkpoint holds the pretrained networks; only the BC term is not saved in it
         labelled = _load_labelled(run.dagger)
-        observations, actions = _aggregate(demos, labelled)
-        if ws.regularizer.weight > 0:
-            agent.set_demo_regularizer(observations, actions, ws.regularizer.weight, ws.regularizer.decay)
+        aggregate = _as_labelled(demos) if labelled is None else _as_labelled(demos).extend(labelled)
+        _set_regularizer(agent, ws, aggregate)
         return WarmStart(demos, generated, None, labelled)
 
     # 2. behaviour cloning (actor) and value regression (critic) on the demos
@@ -84,20 +83,22 @@ def prepare_warm_start(
     metrics = pretrain(
         agent, demos.observations, demos.actions, targets, epochs=ws.bc_epochs, batch_size=ws.bc_batch_size,
         learning_rate=ws.bc_learning_rate, privileged=demos.privileged, progress=progress,
+        episode_starts=demos.episode_starts,
     )
     metrics["bc_demo_episodes"] = float(demos.num_episodes)
     metrics.update({f"demo_success/{name}": rate for name, rate in demos.metadata.get("success_by_task", {}).items()})
-    _set_exploration(agent, ws, demos.observations, demos.actions)
+    aggregate = _as_labelled(demos)
+    _set_exploration(agent, ws, aggregate)
 
     # 3. DAgger: the student's own states, labelled by the expert
     expert_steps = int(demos.metadata.get("steps_run", demos.num_steps))
-    observations, actions = demos.observations, demos.actions
     labelled = None
     if ws.dagger.rounds > 0:
-        observations, actions = _run_dagger(cur, ws, agent, demos, seed, progress)
-        labelled = (observations[demos.num_steps :], actions[demos.num_steps :])
-        expert_steps += len(labelled[0])  # the last refit already sized the std on the whole aggregate
-        metrics["dagger_samples"] = float(len(labelled[0]))
+        recorded = demos.metadata.get("stage") if len(cur.warm_start_phases()) == 1 else None  # a demos file names its stage
+        aggregate = _run_dagger(cur, ws, agent, aggregate, recorded, seed, progress)
+        labelled = aggregate.after(demos.num_steps)
+        expert_steps += len(labelled)  # the last refit already sized the std on the whole aggregate
+        metrics["dagger_samples"] = float(len(labelled))
 
     # 4. the hand-over to PPO
     ppo = agent.spec.ppo
@@ -106,8 +107,7 @@ def prepare_warm_start(
     agent.warm_up_critic(math.ceil(ws.fine_tune.critic_warmup_steps / (ppo.num_envs * ppo.rollout_steps)))
     if ws.fine_tune.freeze_observation_statistics:
         agent.freeze_observation_statistics()
-    if ws.regularizer.weight > 0:
-        agent.set_demo_regularizer(observations, actions, ws.regularizer.weight, ws.regularizer.decay)
+    _set_regularizer(agent, ws, aggregate)
     agent.global_step += expert_steps  # the expert's and the student's steps count in the budget
     metrics["expert_steps"] = float(expert_steps)
     std = agent.policy.actor_logstd.detach().exp().numpy()
@@ -183,11 +183,22 @@ def _say(progress: bool, line: str) -> None:
         print(line, file=sys.stderr, flush=True)
 
 
-def _set_exploration(agent: PPOAgent, ws: WarmStartSpec, observations: np.ndarray, actions: np.ndarray) -> None:
+def _as_labelled(demos: demo_io.Demos) -> Labelled:
+    return Labelled(demos.observations, demos.actions, demos.episode_starts)
+
+
+def _set_regularizer(agent: PPOAgent, ws: WarmStartSpec, data: Labelled) -> None:
+    """DAPG's decaying BC term on everything the expert labelled (`warm_start.regularizer`)."""
+    if ws.regularizer.weight > 0:
+        agent.set_demo_regularizer(data.observations, data.actions, ws.regularizer.weight, ws.regularizer.decay,
+                                   episode_starts=data.episode_starts)
+
+
+def _set_exploration(agent: PPOAgent, ws: WarmStartSpec, data: Labelled) -> None:
     """Set PPO's starting std (`fine_tune.exploration_std`) from the student on these data."""
     ft = ws.fine_tune
     if ft.exploration_std == "auto":
-        fit_exploration_std(agent, observations, actions, ft.std_scale, ft.std_min, ft.std_max)
+        fit_exploration_std(agent, data.observations, data.actions, ft.std_scale, ft.std_min, ft.std_max, data.episode_starts)
     elif ft.exploration_std != "preset":
         agent.policy.actor_logstd.data.fill_(math.log(float(ft.exploration_std)))
 
@@ -198,22 +209,23 @@ def _labelled_env(phase, stage: str, privileged: bool) -> ExpertLabels:
 
 
 def _run_dagger(
-    cur: ResolvedCurriculum, ws: WarmStartSpec, agent: PPOAgent, demos: demo_io.Demos, seed: int, progress: bool
-) -> tuple[np.ndarray, np.ndarray]:
+    cur: ResolvedCurriculum, ws: WarmStartSpec, agent: PPOAgent, demos: Labelled, recorded: str | None, seed: int,
+    progress: bool,
+) -> Labelled:
     phases = cur.warm_start_phases()
-    recorded = demos.metadata.get("stage") if len(phases) == 1 else None  # a demos file names its stage
     fns = [  # env i plays phase i mod the number of phases
         partial(_labelled_env, phase, ws.stage or recorded or phase.stages[-1], agent.privileged_dim > 0)
         for phase in (phases[i % len(phases)] for i in range(agent.spec.ppo.num_envs))
     ]
     envs = make_vector_env(fns, agent.spec.runtime)
 
-    def refit(observations: np.ndarray, actions: np.ndarray) -> dict[str, float]:
+    def refit(data: Labelled) -> dict[str, float]:
         metrics = pretrain(
-            agent, observations, actions, epochs=ws.dagger.epochs, batch_size=ws.bc_batch_size,
+            agent, data.observations, data.actions, epochs=ws.dagger.epochs, batch_size=ws.bc_batch_size,
             learning_rate=ws.bc_learning_rate, update_normalizer=False, progress=progress,
+            episode_starts=data.episode_starts,
         )
-        _set_exploration(agent, ws, observations, actions)  # the next round explores as PPO will
+        _set_exploration(agent, ws, data)  # the next round explores as PPO will
         return metrics
 
     def report(k: int, batch: DaggerRound, metrics: dict[str, float]) -> None:
@@ -226,19 +238,16 @@ def _run_dagger(
             )
 
     try:
-        return dagger(agent, envs, demos.observations, demos.actions, ws.dagger.rounds, ws.dagger.steps_per_round, refit, seed, report)
+        return dagger(agent, envs, demos, ws.dagger.rounds, ws.dagger.steps_per_round, refit, seed, report)
     finally:
         envs.close()
 
 
-def _load_labelled(path: Path) -> tuple[np.ndarray, np.ndarray] | None:
+def _load_labelled(path: Path) -> Labelled | None:
+    """DAgger's labels saved by an earlier call. Files from before recurrent warm starts have no
+    `episode_starts`: every step its own row, as an MLP reads them."""
     if not path.is_file():
         return None
     with np.load(path, allow_pickle=False) as data:
-        return data["observations"], data["actions"]
-
-
-def _aggregate(demos: demo_io.Demos, labelled: tuple[np.ndarray, np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
-    if labelled is None:
-        return demos.observations, demos.actions
-    return np.concatenate([demos.observations, labelled[0]]), np.concatenate([demos.actions, labelled[1]])
+        starts = data["episode_starts"] if "episode_starts" in data else np.ones(len(data["actions"]), dtype=bool)
+        return Labelled(data["observations"], data["actions"], starts)
