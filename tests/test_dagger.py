@@ -114,6 +114,22 @@ def test_critic_warm_up_leaves_the_actor_alone_then_hands_over():
     assert restored.observation_stats_frozen and restored.critic_warmup_until == 2
 
 
+def warm_reach(folder, agent: dict, total_steps: int, critic_warmup_steps: int):
+    """A curriculum on pick-place's `reach`, warm-started from 12 scripted episodes and one DAgger
+    round of 1,200 steps, evaluated on 10 held-out goals every 2,400 steps."""
+    (folder / "agent.yaml").write_text(yaml.safe_dump(agent))
+    doc = {"name": "warm-reach", "agent": "agent.yaml", "total_steps": total_steps,
+           "phases": [{"task": str(PICK_PLACE), "stages": ["reach"]}],
+           "evaluation": {"every_steps": 2_400, "episodes": 10, "split": "test", "stop_on_success": True},
+           "checkpoint": {"every_steps": 100_000},
+           "warm_start": {"generate_episodes": 12, "stage": "reach", "bc_epochs": 30,
+                          "dagger": {"rounds": 1, "steps_per_round": 1_200, "epochs": 10},
+                          "fine_tune": {"critic_warmup_steps": critic_warmup_steps}}}
+    path = folder / "c.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
 def test_a_warm_started_run_keeps_its_success_when_ppo_takes_over(tmp_path):
     """The pick-place `reach` stage, warm-started from 12 scripted episodes and one DAgger round,
     then 6 PPO updates (2 critic-only): the evaluation right after pretraining (logged at the
@@ -122,16 +138,7 @@ def test_a_warm_started_run_keeps_its_success_when_ppo_takes_over(tmp_path):
     agent = {"name": "small", "policy": {"hidden_sizes": [64, 64]},
              "ppo": {"num_envs": 4, "rollout_steps": 300, "num_minibatches": 4, "update_epochs": 4},
              "runtime": {"vector": "sync", "update_threads": 1}}
-    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
-    doc = {"name": "warm-reach", "agent": "agent.yaml", "total_steps": 12_000,
-           "phases": [{"task": str(PICK_PLACE), "stages": ["reach"]}],
-           "evaluation": {"every_steps": 2_400, "episodes": 10, "split": "test", "stop_on_success": True},
-           "checkpoint": {"every_steps": 100_000},
-           "warm_start": {"generate_episodes": 12, "stage": "reach", "bc_epochs": 30,
-                          "dagger": {"rounds": 1, "steps_per_round": 1_200, "epochs": 10},
-                          "fine_tune": {"critic_warmup_steps": 2_400}}}
-    cur = tmp_path / "c.yaml"
-    cur.write_text(yaml.safe_dump(doc))
+    cur = warm_reach(tmp_path, agent, total_steps=12_000, critic_warmup_steps=2_400)
     run = train(cur, run_dir=tmp_path / "run", progress=False)
     records = read_jsonl(run / "metrics.jsonl")
     first = records[0]
@@ -160,16 +167,7 @@ def test_a_recurrent_student_is_warm_started_on_whole_episodes(tmp_path):
     agent = {"name": "small-lstm", "policy": {"type": "lstm", "recurrent_size": 64, "hidden_sizes": [64]},
              "ppo": {"num_envs": 4, "rollout_steps": 300, "num_minibatches": 4, "update_epochs": 2, "bptt_length": 50},
              "runtime": {"vector": "sync", "update_threads": 1}}
-    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
-    doc = {"name": "warm-reach-lstm", "agent": "agent.yaml", "total_steps": 6_000,
-           "phases": [{"task": str(PICK_PLACE), "stages": ["reach"]}],
-           "evaluation": {"every_steps": 2_400, "episodes": 10, "split": "test", "stop_on_success": True},
-           "checkpoint": {"every_steps": 100_000},
-           "warm_start": {"generate_episodes": 12, "stage": "reach", "bc_epochs": 30,
-                          "dagger": {"rounds": 1, "steps_per_round": 1_200, "epochs": 10},
-                          "fine_tune": {"critic_warmup_steps": 1_200}}}
-    cur = tmp_path / "c.yaml"
-    cur.write_text(yaml.safe_dump(doc))
+    cur = warm_reach(tmp_path, agent, total_steps=6_000, critic_warmup_steps=1_200)
     run = train(cur, run_dir=tmp_path / "run", progress=False)
     first = read_jsonl(run / "metrics.jsonl")[0]
     assert first["eval_success_rate"] >= 0.7 and first["bc_action_mse"] < first["bc_action_mse_before"], first
