@@ -39,12 +39,19 @@ def _evaluation_key(plan: SweepPlan) -> dict[str, Any]:
 
 
 def finished(trial: Trial, plan: SweepPlan) -> dict[str, Any] | None:
-    """The trial's stored results, if it finished and was evaluated as this plan asks."""
+    """The trial's stored results, if it was trained and evaluated as this plan asks. Only its
+    `sweep_eval.json` is needed: a finished sweep kept without its policies (committed results)
+    still counts as done."""
     run = RunDir(trial.run_dir)
-    if not (run.final.is_file() and run.sweep_eval.is_file()):
+    if not run.sweep_eval.is_file():
         return None
     stored = json.loads(run.sweep_eval.read_text())
     return stored if stored.get("key") == _evaluation_key(plan) else None
+
+
+def _started(trial: Trial) -> bool:
+    run = RunDir(trial.run_dir)
+    return any(path.exists() for path in (run.checkpoint, run.final, run.sweep_eval))
 
 
 def run_trial(trial: Trial, total_steps: int | None, conditions: list[Condition], stage: str,
@@ -53,7 +60,7 @@ def run_trial(trial: Trial, total_steps: int | None, conditions: list[Condition]
     the results are also written to the run's `sweep_eval.json`. Runs inside a Ray task."""
     run = RunDir(trial.run_dir)
     started = time.perf_counter()
-    if not run.final.is_file():
+    if not run.final.is_file():  # with a final policy only the evaluation is (re)done
         train(trial.curriculum_file, run_dir=run.path, seed=trial.seed, steps=total_steps, resume=True, progress=False)
     loaded = load_run(run.path)
     ev = key["evaluation"]
@@ -73,7 +80,7 @@ def run_sweep(sweep_file: str | Path, out: str | Path | None = None, address: st
     the sweep's folder; returns the folder. Raises `SpecError` (before running anything) for a bad
     sweep file or a folder that already holds a sweep without `resume`."""
     plan = plan_sweep(sweep_file, out)
-    started = [t for t in plan.trials if RunDir(t.run_dir).checkpoint.exists() or RunDir(t.run_dir).final.exists()]
+    started = [t for t in plan.trials if _started(t)]
     if started and not resume:
         raise SpecError.single(plan.out, "", f"already holds {len(started)} trial(s) of a sweep; pass --resume to "
                                               "continue it or choose another --out")
