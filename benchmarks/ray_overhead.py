@@ -1,16 +1,16 @@
 """`runtime.vector: ray` against `sharded` on this machine, in one run, and what a cluster would
 change by arithmetic from the measured parts.
 
-    python benchmarks/ray_overhead.py [--steps 4000] [--repeats 3] [--envs 8]
+    python benchmarks/ray_overhead.py [--steps 4000] [--repeats 3] [--envs 8 16 32]
 
 Rows (the same pre-drawn random actions, alternating row by row so machine noise hits both
 alike; medians over `--repeats`):
 - vector steps/s of taskforge's pick-place env (tasks/metaworld/pick_place.yaml, `place`, full
   randomisation) in `sharded` (one worker process + the learner's own slice) and `ray` (one Ray
-  actor + the learner's own slice), `--envs` envs in 2 slices; goal (issue 22): ray >= 0.9 x;
-- the parts the cluster arithmetic needs: one slice of `--envs / 2` envs stepped in-process
-  (the per-worker rate), a Ray actor's round trip with nothing to do, and the policy's forward
-  pass for `--envs` observations (the learner's share of a step).
+  actor + the learner's own slice), each `--envs` count in 2 slices; goal (issue 22): ray >= 0.9 x;
+- the parts the cluster arithmetic needs, at the first `--envs` count: one slice of half the envs
+  stepped in-process (the per-worker rate), a Ray actor's round trip with nothing to do, and the
+  policy's forward pass for the cluster's envs (the learner's share of a step).
 """
 
 from __future__ import annotations
@@ -99,28 +99,31 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=4000, help="vector steps x envs per measurement")
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--envs", type=int, default=8)
+    parser.add_argument("--envs", type=int, nargs="+", default=[8, 16, 32],
+                        help="env counts to compare at (8: the headline preset's)")
     args = parser.parse_args()
     probe = taskforge_env()
     obs_size, action_size = probe.observation_space.shape[0], probe.action_space.shape[0]
     probe.close()
     rng = np.random.default_rng(0)
-    actions = rng.uniform(-1, 1, (args.steps // args.envs, args.envs, action_size)).astype(np.float32)
 
-    rates: dict[str, list[float]] = {"sharded": [], "ray": []}
-    for _ in range(args.repeats):
-        for vector in rates:
-            rates[vector].append(vector_rate(vector, args.envs, actions))
-    median = {k: statistics.median(v) for k, v in rates.items()}
-    per_slice = statistics.median(slice_rate(args.envs // 2, actions) for _ in range(args.repeats))
+    rows, measured = [], {}
+    for envs in args.envs:
+        actions = rng.uniform(-1, 1, (args.steps // envs, envs, action_size)).astype(np.float32)
+        rates: dict[str, list[float]] = {"sharded": [], "ray": []}
+        for _ in range(args.repeats):
+            for vector in rates:
+                rates[vector].append(vector_rate(vector, envs, actions))
+        median = {k: statistics.median(v) for k, v in rates.items()}
+        measured[envs] = {"runs": rates, "median": median, "ray_over_sharded": median["ray"] / median["sharded"]}
+        rows.append([envs, median["sharded"], median["ray"], f"{median['ray'] / median['sharded']:.2f}",
+                     " / ".join(" ".join(f"{r:,.0f}" for r in rates[k]) for k in rates)])
+    print_table(["envs", "sharded env steps/s", "ray env steps/s", "ray / sharded (goal >= 0.9)", "runs (sharded / ray)"], rows)
+    envs = args.envs[0]
+    actions = rng.uniform(-1, 1, (args.steps // envs, envs, action_size)).astype(np.float32)
+    per_slice = statistics.median(slice_rate(envs // 2, actions) for _ in range(args.repeats))
     rtt = statistics.median(ray_round_trip(500) for _ in range(args.repeats))
-    forward = policy_seconds(args.envs, obs_size, action_size, 500)
-
-    ratio = median["ray"] / median["sharded"]
-    print_table(["vector", "env steps/s (median)", "runs"], [[k, median[k], " ".join(f"{r:,.0f}" for r in rates[k])] for k in rates])
-    print(f"\nray / sharded: {ratio:.2f} (goal >= 0.9)")
-    print(f"one slice of {args.envs // 2} envs in-process: {per_slice:,.0f} env steps/s; Ray round trip {rtt * 1e3:.2f} ms; "
-          f"policy forward for {args.envs} envs {forward * 1e3:.2f} ms")
+    print(f"\none slice of {envs // 2} envs in-process: {per_slice:,.0f} env steps/s; Ray actor round trip {rtt * 1e3:.2f} ms")
 
     # A cluster of N such 2-core nodes, one slice per core (the learner's node steps one slice
     # itself), `per_core` envs per slice as here: a vector step takes the slowest slice's time
@@ -128,7 +131,7 @@ def main() -> None:
     # env time per step
     # (measured for that batch). The PPO update is not in it: it costs the same per sample
     # wherever the samples came from.
-    per_core = args.envs // 2
+    per_core = envs // 2
     slice_seconds = per_core / per_slice
     cluster = []
     for nodes in (1, 2, 4):
@@ -138,9 +141,8 @@ def main() -> None:
     print_table(["nodes (2 cores each)", "envs", "predicted env steps/s (collecting)"],
                 [[c["nodes"], c["envs"], c["predicted_env_steps_per_s"]] for c in cluster])
     path = write_result("ray_overhead", {
-        "envs": args.envs, "steps": args.steps, "repeats": args.repeats,
-        "env_steps_per_s": rates, "median": median, "ray_over_sharded": ratio,
-        "slice_env_steps_per_s": per_slice, "ray_round_trip_s": rtt, "policy_forward_s": forward,
+        "envs": args.envs, "steps": args.steps, "repeats": args.repeats, "by_envs": measured,
+        "slice_env_steps_per_s": per_slice, "slice_envs": per_core, "ray_round_trip_s": rtt,
         "cluster_prediction": cluster, "versions": versions("ray", "torch", "mujoco", "metaworld"),
     })
     print(f"wrote {path}")
