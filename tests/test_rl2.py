@@ -219,6 +219,36 @@ def test_rl2_infers_the_goal_from_reward_and_beats_a_memoryless_policy():
     assert adapted[1:].mean() > baseline[1:].mean() + 0.5, (adapted, baseline)
 
 
+def test_rl2_adapts_on_a_small_version_of_the_shipped_testbed(tmp_path, capsys):
+    """The regression test of RL² (issue 21): the shipped testbed (tasks/point_mass/semicircle.yaml,
+    agents/rl2_testbed.yaml, curricula/point_semicircle_rl2.yaml) made small enough for the suite
+    by overrides alone: goals on a semicircle of radius 0.5 m, episodes of 8 steps (5 to reach the
+    arc, 3 to sweep about half of it), trials of 3 episodes, 150k steps (~1.5 min on 2 cores).
+    Measured on the 50 held-out goals (2026-11-24, 2 cores): seed 0 at 150k episode 1 0.34 ->
+    episode 3 0.74 (at 200k 0.34 -> 0.78, and 0.64 of the later episodes after a first-episode
+    miss); seed 1 at 150k 0.64 -> 0.84, 0.56 after a miss. A memoryless policy
+    repeats its one sweep: flat, and 0 after a miss. A broken trial wrapper, reward input or
+    recurrent state across episodes shows up as a flat curve here."""
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump({
+        "base": str(ROOT / "tasks/point_mass/semicircle.yaml"), "max_episode_steps": 8,
+        "backend": {"type": "point_mass", "goal_radius": 0.5, "goal_arc": [0.0, 180.0], "max_step": 0.1}}))
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump({
+        "base": str(ROOT / "agents/rl2_testbed.yaml"), "name": "rl2-testbed-small", "rl2": {"trial_episodes": 3},
+        "ppo": {"num_envs": 16, "rollout_steps": 48, "bptt_length": 24}}))
+    (tmp_path / "curriculum.yaml").write_text(yaml.safe_dump({
+        "base": str(ROOT / "curricula/point_semicircle_rl2.yaml"), "agent": "agent.yaml", "total_steps": 150_000,
+        "phases": [{"task": "task.yaml"}], "evaluation": {"every_steps": 150_000, "episodes": 50, "split": "test"},
+        "checkpoint": {"every_steps": 150_000}}))
+    run = train(tmp_path / "curriculum.yaml", run_dir=tmp_path / "run", progress=False)
+    out = tmp_path / "meta_test.json"
+    assert main(["eval", str(run), "--episodes", "50", "--out", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["rows"]
+    curve = [e["success_rate"] for e in row["per_episode"]]
+    after_miss = row["after_first_episode"]["miss"]
+    assert curve[-1] >= curve[0] + 0.2, curve
+    assert after_miss["trials"] >= 10 and after_miss["success_rate"] >= 0.35, after_miss
+
+
 # ------------------------------------------------------------------------------------ meta-test
 
 RL2_AGENT = {
