@@ -169,9 +169,10 @@ def plan_sweep(sweep_file: str | Path, out: str | Path | None = None) -> SweepPl
         raise SpecError(issues)
     # absolute: Ray's workers may start in another directory
     out = (Path(out) if out is not None else Path("runs") / "sweeps" / spec.name).resolve()
+    # seed by seed: an interrupted sweep has every variant of its first seeds, a whole table
     trials = [
         Trial(v.name, seed, out / slug(v.name) / CURRICULUM, out / slug(v.name) / f"seed{seed}")
-        for v in spec.variants for seed in spec.seeds
+        for seed in spec.seeds for v in spec.variants
     ]
     conditions = [Condition(c.name, c.task, out / "conditions" / f"{slug(c.name)}.yaml") for c in conditions]
     return SweepPlan(sweep_file, spec, out, trials, conditions, stage)

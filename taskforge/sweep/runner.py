@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 import time
 from collections.abc import Callable
@@ -31,6 +32,10 @@ Echo = Callable[[str], None]
 
 class SweepInterrupted(Exception):
     """Ctrl-C or SIGTERM during a sweep: the running trials saved their checkpoints."""
+
+
+def _interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
 
 
 def _evaluation_key(plan: SweepPlan) -> dict[str, Any]:
@@ -96,6 +101,7 @@ def run_sweep(sweep_file: str | Path, out: str | Path | None = None, address: st
         cpus = plan.spec.cpus_per_trial or os.cpu_count() or 1
         task = ray.remote(num_cpus=cpus, max_retries=0)(run_trial)
         pending = {task.remote(t, plan.spec.total_steps, plan.conditions, plan.stage, key): t for t in todo}
+        previous_term = signal.signal(signal.SIGTERM, _interrupt)  # a job scheduler's stop: as Ctrl-C
         try:
             while pending:
                 (ref,), _ = ray.wait(list(pending), num_returns=1)
@@ -119,6 +125,8 @@ def run_sweep(sweep_file: str | Path, out: str | Path | None = None, address: st
             raise SweepInterrupted(f"sweep interrupted; {len(pending)} trial(s) saved their checkpoints. "
                                    f"Continue with: taskforge sweep {sweep_file} --resume"
                                    + (f" --out {out}" if out else "")) from None
+        finally:
+            signal.signal(signal.SIGTERM, previous_term)
     table = sweep_table(plan, [r for r in records.values() if r is not None], command=" ".join(sys.argv))
     for path in write_tables(plan, table):
         echo(f"wrote {path}")
