@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from taskforge.agents import PPOAgent, RL2Trial
+from taskforge.agents import Agent, RL2Trial
 from taskforge.backends import Split
 from taskforge.envs import TaskEnv
 from taskforge.spec import TaskSpec
@@ -132,7 +132,7 @@ def summarize(results: list[StageResult]) -> dict:
 
 
 def evaluate(
-    agent: PPOAgent,
+    agent: Agent,
     task: TaskSpec,
     task_file: str | Path,
     stage: str,

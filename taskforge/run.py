@@ -30,7 +30,7 @@ from typing import Any
 
 import torch
 
-from taskforge.agents import PPOAgent, agent_observation_space
+from taskforge.agents import Agent, agent_observation_space, make_agent
 from taskforge.atomic import atomic_write
 from taskforge.envs import PhaseShapes, probe_phases
 from taskforge.spec import AgentSpec, SpecError, TaskSpec
@@ -149,7 +149,7 @@ def read_jsonl(path: Path) -> list[dict[str, Any]]:
 
 def build_agent(
     agent_spec: AgentSpec, phases: Sequence[tuple[TaskSpec, str | Path]], seed: int, where: str | Path, agent_file: str | Path
-) -> tuple[PPOAgent, PhaseShapes]:
+) -> tuple[Agent, PhaseShapes]:
     """The agent for a curriculum's phases (one policy for all: their shapes must agree). Used to
     start a run and to load one, so both build exactly the same networks."""
     privileged = agent_spec.asymmetric_critic
@@ -157,7 +157,7 @@ def build_agent(
     if privileged and shapes.privileged_size == 0:
         raise SpecError.single(agent_file, "asymmetric_critic", "the curriculum's backends expose no privileged features; set it to false")
     obs_space = agent_observation_space(agent_spec, shapes.observation_space, shapes.action_space)
-    return PPOAgent(agent_spec, obs_space, shapes.action_space, shapes.privileged_size, seed), shapes
+    return make_agent(agent_spec, obs_space, shapes.action_space, shapes.privileged_size, seed), shapes
 
 
 @dataclass
@@ -165,7 +165,7 @@ class LoadedRun:
     """A run's policy, brought back from a checkpoint with the config stored beside it (tasks
     included, so the original YAML files need not exist any more)."""
 
-    agent: PPOAgent
+    agent: Agent
     config: dict[str, Any]
     shapes: PhaseShapes
     checkpoint: Path

@@ -16,20 +16,36 @@ Modules, in reading order: `gae` (advantages), `normalization` (observation and 
 statistics), `actions` (clip vs squash), `policies` (MLP / LSTM / GRU actor-critic), `storage`
 (rollout buffer and minibatches), `ppo` (the agent and the loss), `rl2` (RL²: trials and the
 augmented observation), `runtime` (vector env, threads), `bc` (warm start: behaviour cloning and
-value regression on demonstrations).
+value regression on demonstrations); model-based: `dynamics` (PETS's ensemble), `planners`
+(random shooting, CEM, MPPI), `mpc` (the agent, with PPO's interface).
 """
+
+from gymnasium.spaces import Box
 
 from taskforge.agents.actions import ClipGaussian, SquashGaussian
 from taskforge.agents.gae import compute_gae
+from taskforge.agents.mpc import MPCAgent
 from taskforge.agents.normalization import ObservationNormalizer, RewardScaler, RunningMeanStd
 from taskforge.agents.policies import ActorCritic, RecurrentState
 from taskforge.agents.ppo import PPOAgent, PPOLoss, explained_variance, ppo_loss
 from taskforge.agents.rl2 import RL2Trial, agent_observation_space, trial_observation_space, wrap_for_training
 from taskforge.agents.runtime import check_same_step_autoreset, make_vector_env, set_torch_threads
 from taskforge.agents.storage import Minibatch, RolloutBuffer
+from taskforge.spec.agent import AgentSpec
+
+Agent = PPOAgent | MPCAgent
+"""What a trainer drives and `evaluate` plays: `collect`, `update`, `act`, `state_dict`."""
+
+
+def make_agent(spec: AgentSpec, observation_space: Box, action_space: Box, privileged_dim: int = 0, seed: int = 0) -> Agent:
+    """The agent `spec.algo` names: PPO (also RL², which is PPO over trials) or model-based MPC."""
+    cls = MPCAgent if spec.algo == "mpc" else PPOAgent
+    return cls(spec, observation_space, action_space, privileged_dim, seed)
 
 __all__ = [
     "ActorCritic",
+    "Agent",
+    "MPCAgent",
     "ClipGaussian",
     "Minibatch",
     "ObservationNormalizer",
@@ -45,6 +61,7 @@ __all__ = [
     "check_same_step_autoreset",
     "compute_gae",
     "explained_variance",
+    "make_agent",
     "make_vector_env",
     "ppo_loss",
     "set_torch_threads",

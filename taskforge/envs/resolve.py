@@ -154,6 +154,9 @@ def _check_warm_start(
     if agent.algo == "rl2":
         msg = "a warm start clones single episodes; an RL² agent reads trials (previous action and reward inputs), which demos do not have"
         issues.append(SpecIssue(str(path), "warm_start", msg))
+    if agent.algo == "mpc" and ws.dagger.rounds > 0:
+        msg = f"algo: mpc has no policy to clone, so no DAgger student; expected 0 (got {ws.dagger.rounds}): its demos seed the model's data"
+        issues.append(SpecIssue(str(path), "warm_start.dagger.rounds", msg))
     if ws.phase != "all" and ws.phase >= len(phases):
         msg = f"no phase {ws.phase}; expected an index below {len(phases)} (phases counts from 0) or 'all'"
         issues.append(SpecIssue(str(path), "warm_start.phase", msg))

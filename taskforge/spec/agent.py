@@ -101,6 +101,57 @@ class RL2Spec(StrictModel):
     per its paper, an unbounded reward in the recurrent state makes RL² collapse."""
 
 
+class MPCSpec(StrictModel):
+    """`algo: mpc`: a learned dynamics model and model-predictive control (PETS, Chua et al.
+    2018). An ensemble of probabilistic networks predicts the next observation and the stage
+    reward; at every step a planner searches action sequences of `horizon` steps through the
+    model and the first action of the best is executed. Defaults: PETS's design (an ensemble of
+    5, CEM with momentum 0.1, one model per particle for the whole horizon) at sizes 2 CPU cores
+    plan in about 10 ms a step (benchmarks/RESULTS.md, "Model-based")."""
+
+    ensemble_size: int = Field(default=5, ge=1, le=64)
+    hidden_sizes: list[int] = Field(default_factory=lambda: [200, 200, 200], min_length=1)
+    """PETS: 4 x 200 (a CPU plans with fewer: agents/mpc.yaml uses 2 x 128)."""
+    learning_rate: float = Field(default=1e-3, gt=0.0)
+    weight_decay: float = Field(default=5e-5, ge=0.0)
+    """L2 on the model's weights (PETS used 2.5e-5 to 1e-4 by layer)."""
+    batch_size: int = Field(default=256, ge=1)
+    model_updates: int = Field(default=200, ge=1)
+    """Gradient steps on the model after each collection of `steps_per_update` env steps."""
+    steps_per_update: int = Field(default=1000, ge=1)
+    """Env steps (all envs together) between model fits."""
+    random_steps: int = Field(default=2000, ge=0)
+    """Uniformly random actions before the first fit (PETS's random first trial)."""
+    buffer_size: int = Field(default=1_000_000, ge=1000)
+    planner: Literal["cem", "mppi", "random_shooting"] = "cem"
+    """`random_shooting`: the best of `population` uniform sequences (as GenReL-World describes);
+    `cem`: `iterations` rounds of refitting a Gaussian to the `elites` best (PETS); `mppi`:
+    `iterations` rounds of an exponentially return-weighted mean (Williams et al. 2017)."""
+    horizon: int = Field(default=15, ge=1, le=200)
+    population: int = Field(default=200, ge=2)
+    elites: int = Field(default=20, ge=1)
+    iterations: int = Field(default=4, ge=1)
+    particles: int = Field(default=5, ge=1)
+    """Rollouts per candidate sequence, particle p through ensemble member p mod ensemble_size
+    for the whole horizon (PETS's TS-inf); the candidate's score is their mean return."""
+    init_std: float = Field(default=0.5, gt=0.0)
+    """The sampling distribution's std (actions in [-1, 1]) at each step's first iteration."""
+    momentum: float = Field(default=0.1, ge=0.0, lt=1.0)
+    """CEM: weight of the previous iteration's mean and std in the refit (PETS's alpha)."""
+    temperature: float = Field(default=1.0, gt=0.0)
+    """MPPI: lambda, in units of the candidates' return std (so it does not depend on the reward's scale)."""
+    discount: float = Field(default=1.0, gt=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _consistent(self) -> MPCSpec:
+        if self.elites > self.population:
+            raise ValueError(f"'elites' ({self.elites}) must be <= 'population' ({self.population})")
+        if self.particles % self.ensemble_size:
+            raise ValueError(f"'particles' ({self.particles}) must be a multiple of 'ensemble_size' ({self.ensemble_size}): "
+                             "each member carries as many particles")
+        return self
+
+
 class RuntimeSpec(StrictModel):
     vector: Literal["sharded", "ray", "async", "sync"] = "sharded"
     """`sharded`: the envs in `workers` slices, the last stepped by the main process and each
@@ -132,15 +183,18 @@ class RuntimeSpec(StrictModel):
 
 class AgentSpec(StrictModel):
     name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9_\-.]+$")
-    algo: Literal["ppo", "rl2"] = "ppo"
+    algo: Literal["ppo", "rl2", "mpc"] = "ppo"
     """`ppo`: one episode at a time; `rl2`: PPO over trials of `rl2.trial_episodes` episodes, with
-    the previous action, reward and an episode-start flag added to the observation."""
+    the previous action, reward and an episode-start flag added to the observation; `mpc`: a
+    learned dynamics model and a planner (the `mpc` section)."""
     policy: PolicySpec = PolicySpec()
     asymmetric_critic: bool = False
     """The critic also sees privileged features (object velocity, goal, drawn physics)."""
     ppo: PPOSpec = PPOSpec()
     rl2: RL2Spec | None = None
     """Trial settings; required with `algo: rl2`, not allowed otherwise."""
+    mpc: MPCSpec | None = None
+    """Model and planner settings; read with `algo: mpc` (default `MPCSpec()`), not allowed otherwise."""
     runtime: RuntimeSpec = RuntimeSpec()
 
     @property
@@ -163,4 +217,13 @@ class AgentSpec(StrictModel):
                 raise ValueError("algo 'rl2' needs a recurrent policy (policy.type 'gru' or 'lstm'), not 'mlp'")
         elif self.rl2 is not None:
             raise ValueError("an 'rl2' section needs algo: rl2")
+        if self.mpc is not None and self.algo != "mpc":
+            raise ValueError("an 'mpc' section needs algo: mpc")
+        if self.algo == "mpc" and self.policy.type != "mlp":
+            raise ValueError("algo 'mpc' plans from the current observation: policy.type must be 'mlp' (the policy section is not used)")
         return self
+
+    @property
+    def planning(self) -> MPCSpec:
+        """The `mpc` section, or its defaults."""
+        return self.mpc or MPCSpec()

@@ -22,7 +22,7 @@ import numpy as np
 from gymnasium.vector import VectorEnv
 from tqdm import tqdm
 
-from taskforge.agents import PPOAgent, make_vector_env, set_torch_threads, wrap_for_training
+from taskforge.agents import Agent, make_vector_env, set_torch_threads, wrap_for_training
 from taskforge.curriculum import CurriculumScheduler
 from taskforge.envs import PhasedEnv, ResolvedCurriculum, load_curriculum
 from taskforge.rollouts import StageResult, evaluate, summarize
@@ -159,7 +159,7 @@ def _train_env(phases: list[tuple[TaskSpec, str]], phase: int, privileged: bool,
 class _Session:
     """One call of `train` from its first update to its last: the loop and what it works on."""
 
-    def __init__(self, cur: ResolvedCurriculum, run: RunDir, start: _Start, agent: PPOAgent,
+    def __init__(self, cur: ResolvedCurriculum, run: RunDir, start: _Start, agent: Agent,
                  scheduler: CurriculumScheduler, progress: bool):
         self.cur, self.run_dir, self.agent, self.scheduler = cur, run, agent, scheduler
         self.seed, self.total, self.config = start.seed, start.total, start.config

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from taskforge import demos as demo_io
-from taskforge.agents import PPOAgent, make_vector_env
+from taskforge.agents import MPCAgent, PPOAgent, make_vector_env
 from taskforge.agents.bc import fit_exploration_std, pretrain, returns_to_go, scaled_rewards
 from taskforge.atomic import atomic_write
 from taskforge.demos.labels import ExpertLabels
@@ -59,7 +59,7 @@ class WarmStart:
 
 
 def prepare_warm_start(
-    cur: ResolvedCurriculum, agent: PPOAgent, run: RunDir, seed: int, resumed: bool, progress: bool
+    cur: ResolvedCurriculum, agent: PPOAgent | MPCAgent, run: RunDir, seed: int, resumed: bool, progress: bool
 ) -> WarmStart | None:
     """Load or generate the demos and apply them to `agent` (see the module doc); writes no file.
     Bad demos (wrong stage or observation size, no successful episode) are a `SpecError` at
@@ -67,6 +67,8 @@ def prepare_warm_start(
     ws = cur.spec.warm_start
     if ws is None:
         return None
+    if isinstance(agent, MPCAgent):
+        return _seed_model(cur, ws, agent, run, seed, resumed, progress)
     demos, generated = _demonstrations(cur, ws, run, seed, resumed, progress)
     _check_size(cur, demos, agent.obs_normalizer.rms.mean.shape[0])
 
@@ -113,6 +115,25 @@ def prepare_warm_start(
     std = agent.policy.actor_logstd.detach().exp().numpy()
     metrics.update({f"exploration_std/{i}": float(s) for i, s in enumerate(std)})
     return WarmStart(demos, generated, metrics, labelled)
+
+
+def _seed_model(
+    cur: ResolvedCurriculum, ws: WarmStartSpec, agent: MPCAgent, run: RunDir, seed: int, resumed: bool, progress: bool
+) -> WarmStart:
+    """`algo: mpc`'s warm start: the demos' transitions seed the model's data and it is fitted
+    on them before the first plan (no policy to clone; the planner starts from a model that has
+    seen the task solved). A resumed run's buffer is in its checkpoint."""
+    demos, generated = _demonstrations(cur, ws, run, seed, resumed, progress)
+    _check_size(cur, demos, agent.observation_space.shape[0])
+    if resumed:
+        return WarmStart(demos, generated, None)
+    added = agent.add_demonstrations(demos.observations, demos.actions, demos.rewards, demos.episode_starts)
+    _say(progress, f"warm start: the model is fitted on {added:,} transitions of {demos.num_episodes} demos")
+    metrics = {f"demo_{k}": v for k, v in agent.update().items()}
+    expert_steps = int(demos.metadata.get("steps_run", demos.num_steps))
+    agent.global_step += expert_steps  # the expert's steps count in the budget
+    metrics.update(expert_steps=float(expert_steps), demo_transitions=float(added), bc_demo_episodes=float(demos.num_episodes))
+    return WarmStart(demos, generated, metrics)
 
 
 def load_demos_file(cur: ResolvedCurriculum, obs_size: int | None = None) -> demo_io.Demos:

@@ -1,0 +1,232 @@
+"""`algo: mpc`: model-based RL as GenReL-World frames it and PETS (Chua et al. 2018) does it: a
+learned model f(s, a) -> (s', r) (`dynamics.py`), and at every step a planner (`planners.py`)
+that picks the action sequence with the highest predicted return and executes its first action.
+
+Reading order of one training iteration (the trainer drives it like PPO: `collect`, `update`):
+
+1. `collect`: `steps_per_update` env steps. Before the first fit, uniform random actions (PETS's
+   random first trial); then the planner, warm-started from each env's previous plan shifted by
+   one step. Every transition (observation, action, stage reward, next observation; the true last
+   observation of an episode that ended, from `final_obs`) goes into the buffer.
+2. `update`: standardisation statistics refitted on the whole buffer, then `model_updates`
+   Adam steps, each member on its own bootstrap draw of `batch_size` transitions.
+
+Why the agent has the same surface as `PPOAgent` (`collect`, `update`, `act`, `state_dict`):
+the curriculum, checkpoints, `--resume`, the progress bar and `taskforge eval` then work
+unchanged. `act` carries each env's plan in the slot where a recurrent policy carries its state,
+so evaluation's episode starts reset it. Termination is not modelled: every shipped stage ends by
+its time limit or on success, and a planned trajectory past success only adds reward.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from gymnasium.spaces import Box
+from gymnasium.vector import VectorEnv
+
+from taskforge.agents.dynamics import DynamicsEnsemble
+from taskforge.agents.planners import plan, shift
+from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
+from taskforge.spec.agent import AgentSpec
+
+OnStep = Callable[[np.ndarray, np.ndarray, np.ndarray, dict], None]
+
+
+class TransitionBuffer:
+    """The model's data: the last `capacity` transitions, oldest overwritten first."""
+
+    def __init__(self, capacity: int, obs_size: int, action_size: int):
+        self.capacity = capacity
+        self.obs = torch.zeros((capacity, obs_size))
+        self.actions = torch.zeros((capacity, action_size))
+        self.rewards = torch.zeros(capacity)
+        self.next_obs = torch.zeros((capacity, obs_size))
+        self.size = self.cursor = 0
+
+    def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray, next_obs: np.ndarray) -> None:
+        for row in zip(obs, actions, rewards, next_obs):
+            i = self.cursor
+            self.obs[i], self.actions[i], self.rewards[i], self.next_obs[i] = (torch.as_tensor(np.asarray(x), dtype=torch.float32) for x in row)
+            self.cursor = (i + 1) % self.capacity
+            self.size = min(self.size + 1, self.capacity)
+
+    def inputs_and_targets(self, idx: torch.Tensor | slice = slice(None)) -> tuple[torch.Tensor, torch.Tensor]:
+        """(obs, action) and (next_obs - obs, reward) of the rows `idx` (of the filled part)."""
+        obs, act = self.obs[: self.size][idx], self.actions[: self.size][idx]
+        targets = torch.cat([self.next_obs[: self.size][idx] - obs, self.rewards[: self.size][idx, None]], dim=-1)
+        return torch.cat([obs, act], dim=-1), targets
+
+    def state_dict(self) -> dict:
+        n = self.size
+        return {"obs": self.obs[:n].clone(), "actions": self.actions[:n].clone(), "rewards": self.rewards[:n].clone(),
+                "next_obs": self.next_obs[:n].clone(), "cursor": self.cursor}
+
+    def load_state_dict(self, state: dict) -> None:
+        n = len(state["rewards"])
+        self.obs[:n], self.actions[:n], self.rewards[:n], self.next_obs[:n] = state["obs"], state["actions"], state["rewards"], state["next_obs"]
+        self.size, self.cursor = n, state["cursor"]
+
+
+class MPCAgent:
+    """A learned-model MPC agent with `PPOAgent`'s interface (see the module doc)."""
+
+    def __init__(self, spec: AgentSpec, observation_space: Box, action_space: Box, privileged_dim: int = 0, seed: int = 0):
+        self.spec, self.seed = spec, seed
+        self.mpc = spec.planning
+        self.observation_space, self.action_space = observation_space, action_space
+        self.privileged_dim = 0  # the model reads observations only
+        self.generator = torch.Generator().manual_seed(seed)
+        obs_size, self.action_size = observation_space.shape[0], action_space.shape[0]
+        self.model = DynamicsEnsemble(obs_size, self.action_size, self.mpc, self.generator)
+        self.optimizer = torch.optim.Adam(self.model.parameters(), lr=self.mpc.learning_rate, weight_decay=self.mpc.weight_decay)
+        self.buffer = TransitionBuffer(self.mpc.buffer_size, obs_size, self.action_size)
+        self.low = torch.as_tensor(action_space.low, dtype=torch.float32)
+        self.high = torch.as_tensor(action_space.high, dtype=torch.float32)
+        self.global_step = 0
+        self.num_updates = 0
+        self._obs: np.ndarray | None = None
+        self._plans: torch.Tensor | None = None
+        self._env_resets = 0
+
+    # ----------------------------------------------------------------------------------- acting
+
+    def initial_state(self, num_envs: int) -> torch.Tensor:
+        """Each env's plan (`[envs, horizon, action]`, in [-1, 1]): the planner's warm start."""
+        return torch.zeros((num_envs, self.mpc.horizon, self.action_size))
+
+    def act(self, obs: np.ndarray, state: torch.Tensor | None = None, episode_start: np.ndarray | None = None,
+            deterministic: bool = True) -> tuple[np.ndarray, torch.Tensor]:
+        """Plan from each observation and return the plans' first actions in env units, and the
+        plans shifted for the next step. `episode_start[i]` discards env i's previous plan. The
+        search is random either way (`deterministic` is accepted for `evaluate`'s sake)."""
+        batch = np.atleast_2d(np.asarray(obs, dtype=np.float32))
+        plans = self.initial_state(len(batch)) if state is None else state.clone()
+        if episode_start is not None:
+            plans[torch.as_tensor(np.atleast_1d(episode_start), dtype=torch.bool)] = 0.0
+        with torch.no_grad():
+            new = plan(self.mpc, self._scorer(torch.as_tensor(batch)), plans, self.generator)
+        return self._to_env(new[:, 0]), shift(new)
+
+    def _scorer(self, obs: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
+        """Predicted return of candidate sequences `[envs, n, horizon, action]` from `obs`
+        `[envs, obs]`: `particles` rollouts each, particle p through member p mod members for the
+        whole horizon (TS-inf), rewards discounted and summed, particles averaged."""
+        members, per_member = self.mpc.ensemble_size, self.mpc.particles // self.mpc.ensemble_size
+
+        def score(candidates: torch.Tensor) -> torch.Tensor:
+            envs, n, horizon, _ = candidates.shape
+            env_actions = self._scale(candidates)
+            # rows of one member: (env, candidate, particle) flattened; every member gets them all
+            actions = env_actions[:, :, None].expand(-1, -1, per_member, -1, -1).reshape(envs * n * per_member, horizon, -1)
+            state = obs[:, None, None].expand(-1, n, per_member, -1).reshape(1, envs * n * per_member, -1).expand(members, -1, -1)
+            total = torch.zeros((members, envs * n * per_member))
+            for t in range(horizon):
+                state, reward = self.model.sample(state, actions[None, :, t].expand(members, -1, -1), self.generator)
+                total += self.mpc.discount**t * reward
+            return total.reshape(members, envs, n, per_member).mean(dim=(0, 3))
+
+        return score
+
+    def _scale(self, unit: torch.Tensor) -> torch.Tensor:
+        """Actions planned in [-1, 1] onto the env's box."""
+        return self.low + (unit + 1.0) * 0.5 * (self.high - self.low)
+
+    def _to_env(self, unit: torch.Tensor) -> np.ndarray:
+        return self._scale(unit).numpy().astype(self.action_space.dtype)
+
+    # ------------------------------------------------------------------------------- training
+
+    def collect(self, envs: VectorEnv, on_step: OnStep | None = None) -> None:
+        """`steps_per_update` env steps (all envs together) into the buffer (module doc, 1.)."""
+        check_same_step_autoreset(envs)
+        if self._obs is None:  # gymnasium seeds env i with seed + i; later resets move past them
+            self._obs, _ = envs.reset(seed=self.seed + self._env_resets * envs.num_envs)
+            self._env_resets += 1
+            self._plans = self.initial_state(envs.num_envs)
+        obs, plans = self._obs, self._plans
+        assert plans is not None
+        for _ in range(math.ceil(self.mpc.steps_per_update / envs.num_envs)):
+            if self.num_updates == 0 and self.global_step < self.mpc.random_steps:
+                unit = torch.rand((envs.num_envs, self.action_size), generator=self.generator) * 2 - 1
+                actions = self._to_env(unit)
+            else:
+                actions, plans = self.act(obs, plans)
+            next_obs, reward, terminated, truncated, infos = envs.step(actions)
+            self.global_step += envs.num_envs
+            if on_step is not None:
+                on_step(reward, terminated, truncated, infos)
+            ended = terminated | truncated
+            landed = next_obs.copy()  # where each transition really ended (SAME_STEP autoreset)
+            for i in np.flatnonzero(ended):
+                landed[i] = infos["final_obs"][i]
+            self.buffer.add(obs, actions, reward, landed)
+            plans[torch.as_tensor(ended)] = 0.0
+            obs = next_obs
+        self._obs, self._plans = obs, plans
+
+    def update(self) -> dict[str, float]:
+        """Fit the model on the buffer (module doc, 2.); its losses as metrics."""
+        if self.buffer.size == 0:
+            return {}
+        with torch_threads(update_threads(self.spec.runtime)):
+            return self._fit()
+
+    def _fit(self) -> dict[str, float]:
+        mpc, model = self.mpc, self.model
+        inputs, targets = self.buffer.inputs_and_targets()
+        model.fit_normalization(inputs, targets)
+        batch = min(mpc.batch_size, self.buffer.size)
+        total = 0.0
+        for _ in range(mpc.model_updates):
+            # bootstrap: each member draws its own batch with replacement
+            idx = torch.randint(self.buffer.size, (mpc.ensemble_size, batch), generator=self.generator)
+            loss = model.loss(inputs[idx], targets[idx])
+            self.optimizer.zero_grad()
+            loss.backward()
+            self.optimizer.step()
+            total += loss.item()
+        self.num_updates += 1
+        with torch.no_grad():  # the fit's error on a sample of the data, in the data's units
+            sample = torch.randint(self.buffer.size, (min(2048, self.buffer.size),), generator=self.generator)
+            x, y = inputs[sample], targets[sample]
+            obs_size = self.observation_space.shape[0]
+            next_obs, reward = model.mean_prediction(x[None, :, :obs_size].expand(mpc.ensemble_size, -1, -1),
+                                                     x[None, :, obs_size:].expand(mpc.ensemble_size, -1, -1))
+            obs_error = ((next_obs - x[None, :, :obs_size]) - y[None, :, :obs_size]) ** 2
+            reward_error = (reward - y[None, :, obs_size]) ** 2
+        return {"model_nll": total / mpc.model_updates, "model_obs_mse": obs_error.mean().item(),
+                "model_reward_mse": reward_error.mean().item(), "buffer_size": float(self.buffer.size)}
+
+    def add_demonstrations(self, observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
+                           episode_starts: np.ndarray) -> int:
+        """Seed the model's data with scripted episodes (the warm start of `algo: mpc`): every
+        step with a successor in its episode becomes a transition. Returns how many."""
+        starts = np.asarray(episode_starts, dtype=bool)
+        keep = np.flatnonzero(~np.append(starts[1:], True))  # not an episode's last step
+        self.buffer.add(observations[keep], actions[keep], rewards[keep], observations[keep + 1])
+        return len(keep)
+
+    def set_progress(self, fraction: float) -> None:
+        """Nothing is scheduled over the budget (PPO anneals its learning rate here)."""
+
+    # ------------------------------------------------------------------------------ checkpoint
+
+    def state_dict(self) -> dict:
+        """Model, optimizer, data, RNG and counters: tensors and plain values only (loads with
+        `torch.load(weights_only=True)`). The buffer is saved whole: a resumed run refits on it."""
+        return {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
+                "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
+                "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.model.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.buffer.load_state_dict(state["buffer"])
+        self.generator.set_state(state["generator"])
+        self.seed, self.global_step, self.num_updates = state["seed"], state["global_step"], state["num_updates"]
+        self._env_resets = state["env_resets"]
+        self._obs = None  # the envs are not the agent's: the next collect() resets them

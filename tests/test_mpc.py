@@ -1,0 +1,158 @@
+"""`algo: mpc`: PETS's ensemble learns dynamics and reward, each planner finds a known optimum,
+and the agent trains through the curriculum (goal-observable point mass), evaluates, resumes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from taskforge.agents.dynamics import DynamicsEnsemble
+from taskforge.agents.planners import plan
+from taskforge.cli import main
+from taskforge.demos import record, save
+from taskforge.envs import TaskEnv, load_task
+from taskforge.run import read_jsonl
+from taskforge.spec import AgentSpec
+from taskforge.spec.agent import MPCSpec
+from taskforge.training import train
+from tests.conftest import ROOT
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+
+
+def test_the_ensemble_learns_dynamics_and_reward_and_knows_its_noise():
+    """s' = s + 0.1 a + noise(0.01), r = -|s'|: after fitting, the mean prediction's error is near
+    the noise floor and the predicted std of the next state is about the noise's."""
+    rng = np.random.default_rng(0)
+    s = rng.uniform(-1, 1, (4000, 2)).astype(np.float32)
+    a = rng.uniform(-1, 1, (4000, 2)).astype(np.float32)
+    s2 = s + 0.1 * a + rng.normal(0, 0.01, s.shape).astype(np.float32)
+    r = -np.linalg.norm(s2, axis=1).astype(np.float32)
+    spec = MPCSpec(ensemble_size=3, hidden_sizes=[64, 64], particles=3)
+    model = DynamicsEnsemble(2, 2, spec, torch.Generator().manual_seed(0))
+    inputs = torch.as_tensor(np.concatenate([s, a], axis=1))
+    targets = torch.as_tensor(np.concatenate([s2 - s, r[:, None]], axis=1))
+    model.fit_normalization(inputs, targets)
+    optimizer = torch.optim.Adam(model.parameters(), lr=3e-3)
+    gen = torch.Generator().manual_seed(1)
+    for _ in range(1500):
+        idx = torch.randint(4000, (3, 256), generator=gen)
+        loss = model.loss(inputs[idx], targets[idx])
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    x = inputs[None, :500].expand(3, -1, -1)
+    with torch.no_grad():
+        next_obs, reward = model.mean_prediction(x[..., :2], x[..., 2:])
+        _, logvar, _ = model((x - model.in_mean) / model.in_std)
+    assert ((next_obs - torch.as_tensor(s2[:500])) ** 2).mean().sqrt() < 0.02  # noise 0.01
+    assert ((reward - torch.as_tensor(r[:500])) ** 2).mean().sqrt() < 0.05
+    predicted_std = (torch.exp(0.5 * logvar) * model.out_std[:2]).mean()
+    assert 0.005 < predicted_std < 0.02, predicted_std
+
+
+@pytest.mark.parametrize("planner", ["cem", "mppi", "random_shooting"])
+def test_each_planner_finds_the_best_sequence_of_a_known_return(planner):
+    """Return = -sum_t (a_t - target_t)^2 with a different target per env: CEM and MPPI converge
+    near it; random shooting beats the average random sequence by far."""
+    target = torch.tensor([[[0.5, -0.3]] * 4, [[-0.6, 0.2]] * 4])  # 2 envs, horizon 4, 2-D actions
+
+    def score(candidates: torch.Tensor) -> torch.Tensor:
+        return -((candidates - target[:, None]) ** 2).sum(dim=(2, 3))
+
+    spec = MPCSpec(planner=planner, horizon=4, population=300, elites=30, iterations=6)
+    result = plan(spec, score, torch.zeros(2, 4, 2), torch.Generator().manual_seed(0))
+    error = ((result - target) ** 2).sum(dim=(1, 2))
+    if planner == "random_shooting":
+        assert (error < 1.6).all(), error  # a uniform sequence is 4.0 and 3.9 off on average
+    else:
+        assert (error < 0.05).all(), error
+
+
+TASK = {
+    "base": str(ROOT / "tasks/point_mass/semicircle.yaml"),
+    "name": "point-reach",
+    "goals": {"observable": True, "train": {"count": 20}, "test": {"count": 20}},
+    "stages": [{"name": "reach",
+                # negative distance: the planner sees the same slope everywhere, also at the goal
+                "rewards": [{"term": "tcp_to_goal", "weight": 1.0, "params": {"kernel": "negative"}}],
+                "success": {"all": [{"feature": "tcp_to_goal_distance", "below": 0.1}]}}],
+}
+AGENT = {
+    "base": str(ROOT / "agents/mpc.yaml"), "name": "mpc-small",
+    "mpc": {"hidden_sizes": [64, 64], "steps_per_update": 400, "model_updates": 150, "random_steps": 400},
+    "ppo": {"num_envs": 4},
+}
+
+
+def write(folder, total_steps: int, **curriculum) -> object:
+    (folder / "task.yaml").write_text(yaml.safe_dump(TASK))
+    (folder / "agent.yaml").write_text(yaml.safe_dump(AGENT))
+    doc = {"name": "mpc-point", "agent": "agent.yaml", "total_steps": total_steps, "phases": [{"task": "task.yaml"}],
+           "evaluation": {"every_steps": 1200, "episodes": 20, "split": "test"}, "checkpoint": {"every_steps": 400}, **curriculum}
+    path = folder / "curriculum.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(tmp_path, capsys):
+    """400 random steps, then planning with the model refitted every 400 steps: the held-out goals
+    (20, on the semicircle, 1 m away, within 0.1 m) are reached within 2,000 steps, where random
+    actions never do. Then `--resume` continues with the model's data, and `taskforge eval` plays it."""
+    cur = write(tmp_path, total_steps=1600)
+    run = train(cur, run_dir=tmp_path / "run", progress=False)
+    first = read_jsonl(run / "metrics.jsonl")
+    assert first[0]["step"] == 400 and first[0]["buffer_size"] == 400.0
+    train(cur, run_dir=run, steps=2400, resume=True, progress=False)
+    metrics = read_jsonl(run / "metrics.jsonl")
+    assert [m["step"] for m in metrics] == [400, 800, 1200, 1600, 2000, 2400]
+    assert metrics[-1]["buffer_size"] == 2400.0  # the data survived the resume
+    assert metrics[-1]["model_obs_mse"] < 1e-3
+    out = tmp_path / "eval.json"
+    assert main(["eval", str(run), "--episodes", "20", "--out", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["success_rate"] >= 0.8, row
+
+
+def test_mpc_agent_files_are_checked_like_any_other(tmp_path, capsys):
+    bad = {"name": "x", "algo": "mpc", "mpc": {"particles": 7, "ensemble_size": 5}}
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(bad))
+    assert main(["validate", str(tmp_path / "agent.yaml")]) == 2
+    assert "multiple of 'ensemble_size'" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="needs algo: mpc"):
+        AgentSpec.model_validate({"name": "x", "mpc": {}})
+
+
+class StraightToGoal:
+    """A scripted point-mass expert (the point mass has none of its own): full speed at the goal."""
+
+    name = "straight"
+
+    def reset(self, env) -> None:
+        pass
+
+    def __call__(self, env) -> np.ndarray:
+        features = env.backend.features()
+        step = (features["goal_pos"] - features["tcp_pos"])[:2] / 0.1
+        return np.clip(step, -1.0, 1.0).astype(np.float32)
+
+
+def test_mpc_warm_start_seeds_the_models_data_and_refuses_dagger(tmp_path, capsys):
+    cur = write(tmp_path, total_steps=800, warm_start={"demos": "demos.npz", "dagger": {"rounds": 1}})
+    task = load_task(tmp_path / "task.yaml")
+    demos = record(TaskEnv(task, tmp_path / "task.yaml", stage="reach"), StraightToGoal(), episodes=4, keep_failed=True)
+    save(demos, tmp_path / "demos.npz")
+    assert main(["validate", str(cur)]) == 2
+    assert "warm_start.dagger.rounds" in capsys.readouterr().err
+    cur = write(tmp_path, total_steps=800, warm_start={"demos": "demos.npz"})
+    run = train(cur, run_dir=tmp_path / "warm", progress=False)
+    metrics = read_jsonl(run / "metrics.jsonl")
+    # every demo step with a successor in its episode is a transition; the expert's steps count
+    assert metrics[0]["demo_transitions"] == demos.num_steps - demos.num_episodes
+    assert metrics[0]["step"] == metrics[0]["expert_steps"] == demos.num_steps
+    # the model was fitted on them before the first plan: no random phase, the buffer starts there
+    assert metrics[1]["buffer_size"] == demos.num_steps - demos.num_episodes + 400
