@@ -135,3 +135,21 @@ def test_bad_sweep_files_are_one_line_errors_at_the_sweep_files_field(tmp_path, 
     assert main(["validate", str(sweep)]) == 2
     err = capsys.readouterr().err
     assert f"{sweep}: {where}" in err and "Traceback" not in err
+
+
+def test_a_base_curriculum_that_is_itself_a_variant_elsewhere_resolves_its_tasks(tmp_path):
+    """The sweep's curriculum has a `base:` in another folder: its phases' task paths are the
+    base's, relative to the base; a variant's task override must still find them."""
+    write_sweep(tmp_path)
+    (tmp_path / "more").mkdir()
+    (tmp_path / "more" / "longer.yaml").write_text(yaml.safe_dump({"base": "../curriculum.yaml", "name": "longer"}))
+    sweep = tmp_path / "more" / "sweep.yaml"
+    sweep.write_text(yaml.safe_dump({
+        "name": "nested", "curriculum": "longer.yaml", "seeds": [0],
+        "variants": [{"name": "noisy", "task": NOISY}], "evaluation": {"conditions": [{"name": "as trained"}]}}))
+    plan = plan_sweep(sweep, tmp_path / "out")
+    from taskforge.sweep.plan import write_plan
+
+    write_plan(plan)
+    task = yaml.safe_load((tmp_path / "out" / "noisy" / "task_0.yaml").read_text())
+    assert task["base"] == str((tmp_path / "task.yaml").resolve())

@@ -94,6 +94,11 @@ def read_task_yaml(path: str | Path) -> dict[str, Any]:
     return read_yaml_with_base(path, _TASK_PATH_FIELDS)
 
 
+def read_curriculum_yaml(path: str | Path) -> dict[str, Any]:
+    """A curriculum file's mapping with its `base:` chain merged in, every path relative to `path`."""
+    return read_yaml_with_base(path, _CURRICULUM_PATH_FIELDS)
+
+
 def _rebase_path(data: Any, field: tuple[str, ...], old_file: Path, new_file: Path) -> None:
     """Rewrite a relative path at `field` so that it names the same file from `new_file`'s folder.
     Anything not shaped as `field` expects is left for schema validation to report."""

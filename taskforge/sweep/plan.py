@@ -26,7 +26,7 @@ from taskforge.spec import (
     TaskSpec,
     expected_one_of,
     load_sweep_spec,
-    read_yaml_with_base,
+    read_curriculum_yaml,
     resolve_relative,
 )
 
@@ -75,7 +75,7 @@ def _variant_files(spec: SweepSpec, sweep_file: Path, index: int) -> dict[str, d
     """The files of variant `index`, by name: each a `base:` (absolute) plus the overrides."""
     variant = spec.variants[index]
     base_file = resolve_relative(sweep_file, spec.curriculum).resolve()
-    merged = read_yaml_with_base(base_file)
+    merged = read_curriculum_yaml(base_file)
     files: dict[str, dict[str, Any]] = {}
     curriculum: dict[str, Any] = {"base": str(base_file), **variant.curriculum}
     # paths a variant writes are relative to the sweep file, those of the base to the base
