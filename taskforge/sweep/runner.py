@@ -118,6 +118,8 @@ def run_sweep(sweep_file: str | Path, out: str | Path | None = None, address: st
                 scores = ", ".join(f"{name} {r['success_rate']:.2f}" for name, r in record["conditions"].items())
                 echo(f"[{done}/{len(plan.trials)}] {trial.variant}, seed {trial.seed}: {scores} "
                      f"({record['seconds'] / 60:.1f} min)")
+                if pending:  # the table so far, so a long sweep's partial results are there to read
+                    write_tables(plan, sweep_table(plan, _done(records), command=" ".join(sys.argv)))
         except KeyboardInterrupt:
             for ref in pending:
                 ray.cancel(ref)  # a KeyboardInterrupt in the trial: train saves its checkpoint
@@ -127,10 +129,13 @@ def run_sweep(sweep_file: str | Path, out: str | Path | None = None, address: st
                                    + (f" --out {out}" if out else "")) from None
         finally:
             signal.signal(signal.SIGTERM, previous_term)
-    table = sweep_table(plan, [r for r in records.values() if r is not None], command=" ".join(sys.argv))
-    for path in write_tables(plan, table):
+    for path in write_tables(plan, sweep_table(plan, _done(records), command=" ".join(sys.argv))):
         echo(f"wrote {path}")
     if failures:
         raise RuntimeError(f"{len(failures)} trial(s) failed:\n" + "\n".join(failures))
     return plan.out
 
+
+
+def _done(records: dict[tuple[str, int], dict[str, Any] | None]) -> list[dict[str, Any]]:
+    return [r for r in records.values() if r is not None]
