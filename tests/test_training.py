@@ -18,7 +18,7 @@ import torch
 import yaml
 
 from taskforge.cli import main
-from taskforge.run import load_checkpoint, read_jsonl
+from taskforge.run import load_checkpoint, read_jsonl, save_checkpoint
 from taskforge.training import train
 from tests.conftest import ROOT
 
@@ -318,6 +318,19 @@ def test_resume_with_other_curriculum_is_refused(tmp_path, capsys):
     other = write_curriculum(tmp_path, total_steps=200, promotion={"threshold": 0.5, "window": 4})
     assert main(["train", str(other), "--run-dir", str(tmp_path / "run"), "--resume"]) == 2
     assert "differs from the curriculum/agent of the run" in capsys.readouterr().err
+
+
+def test_a_run_saved_before_a_schema_field_was_added_still_resumes(tmp_path):
+    # a checkpoint from an older taskforge lacks fields added since (here: the Ray settings and
+    # the MPC section, whose defaults the current schema fills in); that is the same run
+    cur = write_curriculum(tmp_path, total_steps=1200)
+    run = tmp_path / "run"
+    train(cur, run_dir=run, steps=1200, stop_at=600, progress=False)
+    state = load_checkpoint(run / "checkpoint.pt")
+    del state["config"]["agent"]["runtime"]["ray_max_restarts"], state["config"]["agent"]["mpc"]
+    save_checkpoint(state, run / "checkpoint.pt")
+    train(cur, run_dir=run, resume=True, progress=False)
+    assert load_checkpoint(run / "final.pt")["agent"]["global_step"] == 1200
 
 
 def test_asymmetric_critic_trains_on_meta_world_privileged_features(tmp_path):

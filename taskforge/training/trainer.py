@@ -20,6 +20,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium.vector import VectorEnv
+from pydantic import BaseModel, ValidationError
 from tqdm import tqdm
 
 from taskforge.agents import Agent, make_vector_env, set_torch_threads, wrap_for_training
@@ -126,7 +127,7 @@ def _start(cur: ResolvedCurriculum, run: RunDir, seed: int | None, steps: int | 
     if resume and run.checkpoint.is_file():
         state = load_checkpoint(run.checkpoint)
         stored = state["config"]
-        if stored["curriculum"] != cur.spec.model_dump(mode="json") or stored["agent"] != cur.agent.model_dump(mode="json"):
+        if not (_same_spec(stored["curriculum"], cur.spec) and _same_spec(stored["agent"], cur.agent)):
             raise SpecError.single(
                 cur.file, "", f"differs from the curriculum/agent of the run in {run} (see its {run.config.name}); "
                 "resume with the same files or start a new --run-dir",
@@ -148,6 +149,16 @@ def _start(cur: ResolvedCurriculum, run: RunDir, seed: int | None, steps: int | 
 
 
 # ------------------------------------------------------------------------------ the loop
+
+
+def _same_spec(stored: dict[str, Any], current: BaseModel) -> bool:
+    """Whether a checkpoint's stored spec is `current`, compared after reading it with today's
+    schema: a field added to the schema since the run started (with its default) must not stop
+    the run from resuming. A stored spec today's schema rejects is a different one."""
+    try:
+        return type(current).model_validate(stored).model_dump(mode="json") == current.model_dump(mode="json")
+    except ValidationError:
+        return False
 
 
 def _train_env(phases: list[tuple[TaskSpec, str]], phase: int, privileged: bool, agent: AgentSpec) -> gymnasium.Env:
