@@ -325,6 +325,25 @@ def test_learning_progress_sampler_floor_and_flat_start():
     assert probabilities[0] == pytest.approx(0.8 + 0.05)
 
 
+def test_learning_progress_is_uniform_once_every_sub_task_has_settled():
+    # MT10 from scratch: two sub-tasks solved long ago, eight never solved. Their LPs are leftovers
+    # of the slow average's approach to 1 (~1e-5) and exact zeros; proportional sampling of those
+    # leftovers gave the two solved sub-tasks 92 % of all episodes.
+    sampler = LearningProgressSampler(10)
+    for _ in range(1500):
+        sampler.update(0, True)
+        sampler.update(5, True)
+        for task in (1, 2, 3, 4, 6, 7, 8, 9):
+            sampler.update(task, False)
+    assert 0.0 < sampler.learning_progress().max() < 1e-3
+    assert np.allclose(sampler.probabilities(), 0.1)
+    # One sub-task starting to move by the floor brings LP sampling back.
+    for _ in range(3):
+        sampler.update(7, True)
+    probabilities = sampler.probabilities()
+    assert probabilities[7] > 0.9 and np.allclose(np.delete(probabilities, 7), 0.1 / 10, atol=1e-3)
+
+
 def test_success_rates_per_stage_and_sub_task():
     scheduler = make_scheduler([["solve"]], tasks=[["x", "y"]], promotion={"window": 4})
     for task, success in [("x", True), ("y", True), ("x", False), ("x", True), ("x", True), ("y", False)]:

@@ -22,6 +22,12 @@ Choices, and how they differ from the paper:
   keeps every sub-task at ≥ ε/n of the episodes.
 - No reweighting of success toward low probabilities and no z-score/sigmoid: plain ∝ LP plus ε is
   easy to reason about and to test.
+- When no sub-task shows progress of at least `MIN_PROGRESS` (one percentage point between the two
+  averages), sampling is uniform. Without this floor, LP/ΣLP normalises leftovers: MT10 from scratch
+  (benchmarks/RESULTS.md, multi-task) solved reach and drawer-close early, their slow EMAs crept to
+  1 (LP ~1e-5) while the eight unsolved tasks had LP exactly 0, so the two solved tasks drew 92 %
+  of all episodes and each unsolved one 1 % (ε/n), for the rest of the 2M steps. As long as one
+  sub-task moves by the floor, LP sampling is unchanged.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ import numpy as np
 ALPHA_FAST = 0.1
 ALPHA_SLOW = 0.01
 EPSILON = 0.1
+MIN_PROGRESS = 0.01
 
 
 class LearningProgressSampler:
@@ -42,6 +49,7 @@ class LearningProgressSampler:
         alpha_fast: float = ALPHA_FAST,
         alpha_slow: float = ALPHA_SLOW,
         epsilon: float = EPSILON,
+        min_progress: float = MIN_PROGRESS,
     ):
         if num_tasks < 1:
             raise ValueError(f"need at least one sub-task, got {num_tasks}")
@@ -51,7 +59,10 @@ class LearningProgressSampler:
             raise ValueError(f"need 0 < epsilon <= 1, got {epsilon}")
         self.alpha_fast = alpha_fast
         self.alpha_slow = alpha_slow
+        if min_progress < 0.0:
+            raise ValueError(f"need min_progress >= 0, got {min_progress}")
         self.epsilon = epsilon
+        self.min_progress = min_progress
         self._fast = np.zeros(num_tasks)
         self._slow = np.zeros(num_tasks)
 
@@ -64,13 +75,13 @@ class LearningProgressSampler:
         return np.abs(self._fast - self._slow)
 
     def probabilities(self) -> np.ndarray:
-        """(1 − ε)·LP/ΣLP + ε/n. Uniform while no sub-task has progressed yet (ΣLP = 0)."""
+        """(1 − ε)·LP/ΣLP + ε/n. Uniform while no sub-task's LP reaches `min_progress` (none has
+        progressed yet, or every one has settled, solved or not)."""
         progress = self.learning_progress()
         uniform = np.full(progress.size, 1.0 / progress.size)
-        total = progress.sum()
-        if total <= 0.0:
+        if progress.max() < self.min_progress or progress.sum() <= 0.0:
             return uniform
-        return (1.0 - self.epsilon) * progress / total + self.epsilon * uniform
+        return (1.0 - self.epsilon) * progress / progress.sum() + self.epsilon * uniform
 
     def sample(self, rng: np.random.Generator) -> int:
         probabilities = self.probabilities()
