@@ -26,7 +26,7 @@ Choices, and how they differ from the paper:
   averages), sampling is uniform. Without this floor, LP/ΣLP normalises leftovers: MT10 from scratch
   (benchmarks/RESULTS.md, multi-task) solved reach and drawer-close early, their slow EMAs crept to
   1 (LP ~1e-5) while the eight unsolved tasks had LP exactly 0, so the two solved tasks drew 92 %
-  of all episodes and each unsolved one 1 % (ε/n), for the rest of the 2M steps. As long as one
+  of the episodes at the end of the 2M steps and each unsolved one 1 % (ε/n). As long as one
   sub-task moves by the floor, LP sampling is unchanged.
 """
 
@@ -57,10 +57,10 @@ class LearningProgressSampler:
             raise ValueError(f"need 0 < alpha_slow < alpha_fast <= 1, got {alpha_slow}, {alpha_fast}")
         if not 0.0 < epsilon <= 1.0:
             raise ValueError(f"need 0 < epsilon <= 1, got {epsilon}")
-        self.alpha_fast = alpha_fast
-        self.alpha_slow = alpha_slow
         if min_progress < 0.0:
             raise ValueError(f"need min_progress >= 0, got {min_progress}")
+        self.alpha_fast = alpha_fast
+        self.alpha_slow = alpha_slow
         self.epsilon = epsilon
         self.min_progress = min_progress
         self._fast = np.zeros(num_tasks)
