@@ -13,6 +13,7 @@ process, batched through the policy; trial k uses goal `k mod number-of-goals` o
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -150,18 +151,57 @@ def evaluate(
     False) draw from the agent's generator reseeded with `seed`, and its state is restored
     afterwards, so an evaluation during training leaves the training's random stream alone.
     `stop_on_success` ends each episode at its first success (same success rate, fewer steps)."""
+    return evaluate_rows(agent, task, task_file, [(stage, sub_task)], split, trials, trial_episodes, seed, parallel,
+                         deterministic, stop_on_success)[0]
+
+
+def evaluate_rows(
+    agent: Agent,
+    task: TaskSpec,
+    task_file: str | Path,
+    rows: Sequence[tuple[str, str | None]],
+    split: Split,
+    trials: int,
+    trial_episodes: int | None = None,
+    seed: int = 0,
+    parallel: int = 4,
+    deterministic: bool = True,
+    stop_on_success: bool = False,
+) -> list[StageResult]:
+    """`evaluate` for each (stage, sub-task) of one task in turn, on one set of envs.
+
+    Why one set: a task-set env builds the simulator of every sub-task at construction (its
+    physics randomiser needs each model; ~50 MB for a Meta-World env), so four fresh envs per
+    sub-task built 400 of them per MT10 evaluation; reused, 40. Every trial
+    resets with its own seed, stage, sub-task and goal, so a row's trials do not depend on the rows
+    before it."""
+    if not rows:
+        raise ValueError("nothing to evaluate: no (stage, sub-task) rows")
     k = trial_episodes or agent.spec.trial_episodes
     rl2 = agent.spec.algo == "rl2"
     privileged = agent.privileged_dim > 0
     envs = [
         RL2Trial(
-            TaskEnv(task, task_file, stage=stage, split=split, task_name=sub_task, privileged=privileged, end_on_success=stop_on_success),
+            TaskEnv(task, task_file, stage=rows[0][0], split=split, privileged=privileged, end_on_success=stop_on_success),
             k, augment=rl2, reward_scale=agent.spec.rl2.reward_input_scale if agent.spec.rl2 else 1.0,
         )
         for _ in range(min(parallel, trials))
     ]
+    try:
+        return [_trials(agent, envs, task.name, stage, sub_task, split, trials, k, seed, deterministic)
+                for stage, sub_task in rows]
+    finally:
+        for env in envs:
+            env.close()
+
+
+def _trials(
+    agent: Agent, envs: list[RL2Trial], task_name: str, stage: str, sub_task: str | None, split: Split,
+    trials: int, k: int, seed: int, deterministic: bool,
+) -> StageResult:
+    """One row: trial n on goal `n mod number-of-goals`, seeded `seed + n`, batched over `envs`."""
     num_goals = envs[0].unwrapped.backend.num_goals(split)
-    result = StageResult(sub_task or task.name, stage, split, k)
+    result = StageResult(sub_task or task_name, stage, split, k)
     queue = list(range(trials))
     active = [True] * len(envs)
     obs = np.zeros((len(envs), envs[0].observation_space.shape[0]), dtype=np.float32)
@@ -169,7 +209,8 @@ def evaluate(
 
     def start(i: int) -> None:
         n = queue.pop(0)
-        obs[i], _ = envs[i].reset(seed=seed + n, options={"stage": stage, "goal_index": n % num_goals})
+        options = {"stage": stage, "task": sub_task, "goal_index": n % num_goals}
+        obs[i], _ = envs[i].reset(seed=seed + n, options=options)
         starts[i] = True  # a fresh recurrent state for every trial
 
     for i in range(len(envs)):
@@ -193,6 +234,4 @@ def evaluate(
                 else:
                     active[i] = False
     agent.generator.set_state(training_rng)
-    for env in envs:
-        env.close()
     return result

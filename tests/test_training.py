@@ -352,3 +352,28 @@ def test_asymmetric_critic_without_privileged_features_is_a_clear_error(tmp_path
     (tmp_path / "agent.yaml").write_text(yaml.safe_dump({**AGENT, "asymmetric_critic": True}))
     assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
     assert "asymmetric_critic: the curriculum's backends expose no privileged features" in capsys.readouterr().err
+
+
+def test_evaluating_sub_tasks_in_turn_on_shared_envs_matches_each_alone():
+    """An MT10 evaluation plays each sub-task on one set of envs (fresh ones per sub-task built
+    400 Meta-World envs per evaluation): a row must not depend on the rows played before it
+    on those envs, and each row must play its own sub-task."""
+    import numpy as np
+    from gymnasium.spaces import Box
+
+    from taskforge.agents import PPOAgent
+    from taskforge.envs import load_task
+    from taskforge.rollouts import evaluate, evaluate_rows
+    from tests.conftest import TASKS
+    from tests.test_agents_ppo import SMALL_PPO, agent_spec
+
+    mt10 = TASKS / "metaworld/mt10.yaml"
+    spec = agent_spec(policy={"hidden_sizes": [32, 32]}, ppo=SMALL_PPO, runtime={"vector": "sync", "update_threads": 1})
+    agent = PPOAgent(spec, Box(-np.inf, np.inf, (39 + 10,), np.float32), Box(-1.0, 1.0, (4,), np.float32), seed=0)
+    task = load_task(mt10)
+    rows = evaluate_rows(agent, task, mt10, [("solve", "reach-v3"), ("solve", "window-open-v3")], "test", trials=3,
+                         seed=7, parallel=2, stop_on_success=True)
+    alone = evaluate(agent, task, mt10, "solve", "test", 3, sub_task="window-open-v3", seed=7, parallel=2, stop_on_success=True)
+    assert [r.task for r in rows] == ["reach-v3", "window-open-v3"]
+    assert rows[1].returns == alone.returns and rows[1].lengths == alone.lengths
+    assert rows[0].returns != rows[1].returns

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from taskforge.rollouts import StageResult, evaluate
+from taskforge.rollouts import StageResult, evaluate_rows
 from taskforge.run import load_run
 from taskforge.spec import SpecError
 
@@ -30,10 +30,9 @@ def evaluate_run(
     for (task, task_file, phase_stages), sub_task_names in zip(run.phases, run.shapes.task_names):
         names = phase_stages if not stages else [s for s in phase_stages if s in stages]
         sub_tasks = sub_task_names if len(sub_task_names) > 1 else [None]
-        for stage in names:
-            for sub in sub_tasks:
-                rows.append(evaluate(agent, task, task_file, stage, split, trials, k, sub_task=sub, seed=seed,
-                                     deterministic=deterministic))
+        if names:
+            rows += evaluate_rows(agent, task, task_file, [(stage, sub) for stage in names for sub in sub_tasks], split,
+                                  trials, k, seed=seed, deterministic=deterministic)
     if stages and not rows:
         known = sorted({s for _, _, phase_stages in run.phases for s in phase_stages})
         raise SpecError.single(run.checkpoint, "stage", f"none of {', '.join(stages)} is in this run; expected one of {', '.join(known)}")

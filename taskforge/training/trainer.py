@@ -14,6 +14,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass
 from functools import partial
+from itertools import groupby
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +27,7 @@ from tqdm import tqdm
 from taskforge.agents import Agent, make_vector_env, set_torch_threads, wrap_for_training
 from taskforge.curriculum import CurriculumScheduler
 from taskforge.envs import PhasedEnv, ResolvedCurriculum, load_curriculum
-from taskforge.rollouts import StageResult, evaluate, summarize
+from taskforge.rollouts import StageResult, evaluate_rows, summarize
 from taskforge.run import RunDir, build_agent, load_checkpoint, save_checkpoint, save_json
 from taskforge.spec import AgentSpec, SpecError, TaskSpec
 from taskforge.training.driver import CurriculumDriver, EpisodeStats
@@ -314,10 +315,10 @@ class _Session:
         from training."""
         ev = self.cur.spec.evaluation
         results = []
-        for p, stage, sub_task in rows or self.eval_rows():
+        for p, phase_rows in groupby(rows or self.eval_rows(), key=lambda row: row[0]):
             phase = self.cur.phases[p]
-            results.append(evaluate(self.agent, phase.task, phase.task_file, stage, ev.split, ev.episodes,
-                                    sub_task=sub_task, seed=self.seed + 10_000, stop_on_success=ev.stop_on_success))
+            results += evaluate_rows(self.agent, phase.task, phase.task_file, [row[1:] for row in phase_rows], ev.split,
+                                     ev.episodes, seed=self.seed + 10_000, stop_on_success=ev.stop_on_success)
         return results
 
     def final_evaluation(self) -> None:
