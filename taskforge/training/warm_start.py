@@ -97,7 +97,7 @@ def prepare_warm_start(
     labelled = None
     if ws.dagger.rounds > 0:
         recorded = demos.metadata.get("stage") if len(cur.warm_start_phases()) == 1 else None  # a demos file names its stage
-        aggregate = _run_dagger(cur, ws, agent, aggregate, recorded, seed, progress)
+        aggregate = _run_dagger(cur, ws, agent, aggregate, recorded, seed, progress, metrics)
         labelled = aggregate.after(demos.num_steps)
         expert_steps += len(labelled)  # the last refit already sized the std on the whole aggregate
         metrics["dagger_samples"] = float(len(labelled))
@@ -231,8 +231,9 @@ def _labelled_env(phase, stage: str, privileged: bool) -> ExpertLabels:
 
 def _run_dagger(
     cur: ResolvedCurriculum, ws: WarmStartSpec, agent: PPOAgent, demos: Labelled, recorded: str | None, seed: int,
-    progress: bool,
+    progress: bool, metrics: dict[str, float],
 ) -> Labelled:
+    """DAgger's rounds; each round's student success (overall and per sub-task) goes into `metrics`."""
     phases = cur.warm_start_phases()
     fns = [  # env i plays phase i mod the number of phases
         partial(_labelled_env, phase, ws.stage or recorded or phase.stages[-1], agent.privileged_dim > 0)
@@ -249,17 +250,23 @@ def _run_dagger(
         _set_exploration(agent, ws, data)  # the next round explores as PPO will
         return metrics
 
-    def report(k: int, batch: DaggerRound, metrics: dict[str, float]) -> None:
+    def report(k: int, batch: DaggerRound, refit_metrics: dict[str, float]) -> None:
+        by_task = batch.success_by_task()
+        if batch.success_rate is not None:
+            metrics[f"dagger_student_success/round{k}"] = batch.success_rate
+        if len(by_task) > 1:
+            metrics.update({f"dagger_student_success/round{k}/{name}": rate for name, rate in by_task.items()})
         if progress:
             rate = "-" if batch.success_rate is None else f"{batch.success_rate:.2f}"
+            tasks = f" ({', '.join(f'{n} {r:.2f}' for n, r in sorted(by_task.items()))})" if len(by_task) > 1 else ""
             print(
-                f"DAgger round {k}/{ws.dagger.rounds}: student success {rate} over {len(batch.episode_successes)} episodes, "
-                f"{len(batch.observations):,} states labelled, action MSE after refit {metrics['bc_action_mse']:.4f}",
+                f"DAgger round {k}/{ws.dagger.rounds}: student success {rate} over {len(batch.episode_successes)} episodes{tasks}, "
+                f"{len(batch.observations):,} states labelled, action MSE after refit {refit_metrics['bc_action_mse']:.4f}",
                 file=sys.stderr,
             )
 
     try:
-        return dagger(agent, envs, demos, ws.dagger.rounds, ws.dagger.steps_per_round, refit, seed, report)
+        return dagger(agent, envs, demos, ws.dagger.rounds, ws.dagger.steps_per_round, refit, seed, report, ws.dagger.allocation)
     finally:
         envs.close()
 
