@@ -424,3 +424,36 @@ def test_load_state_dict_rejects_another_curriculum():
         other.load_state_dict(state)
     with pytest.raises(ValueError, match="version"):
         full_scheduler(0).load_state_dict({**state, "version": 0})
+
+
+def test_reweighted_learning_progress_prefers_the_task_whose_success_is_low_and_rising():
+    """Two sub-tasks with the same raw progress (success up by 0.1): one climbing from 0.1, one
+    from 0.85. Plain LP splits the episodes evenly; with the paper's p_θ = 0.1 the low one gets
+    most of them."""
+    def climbing(reweight):
+        sampler = LearningProgressSampler(2, epsilon=0.1, reweight=reweight)
+        sampler.load_state_dict({"fast": [0.2, 0.95], "slow": [0.1, 0.85]})
+        return sampler
+    assert np.allclose(climbing(None).probabilities(), 0.5)
+    low, high = climbing(0.1).probabilities()
+    assert low > 0.8 and high < 0.2 and low + high == pytest.approx(1.0)
+    assert np.allclose(climbing(0.5).probabilities(), 0.5)  # θ = 1/2 is the identity
+    with pytest.raises(ValueError, match="reweight"):
+        LearningProgressSampler(2, reweight=0.7)
+
+
+def test_the_scheduler_reweights_progress_toward_low_success_when_asked():
+    """'low' climbs 0 → 0.3 and 'high' 0.7 → 1.0 over their last 100 episodes: the same raw
+    progress, so plain LP shares the episodes; `reweight: 0.1` gives most to 'low'. A reweight
+    without learning-progress sampling is refused."""
+    def share_of_low(sampling: dict) -> float:
+        scheduler = make_scheduler([["solve"]], tasks=[["low", "high"]], sampling=sampling, promotion={"window": 10_000})
+        for i in range(1000):
+            late = i >= 900
+            scheduler.record(current(scheduler, "low"), late and i % 10 in (1, 4, 7), 1)
+            scheduler.record(current(scheduler, "high"), late or i % 10 < 7, 1)
+        return sum(scheduler.assign().task == "low" for _ in range(2000)) / 2000
+    assert 0.3 < share_of_low({"mode": "learning_progress"}) < 0.7
+    assert share_of_low({"mode": "learning_progress", "reweight": 0.1}) > 0.75
+    with pytest.raises(ValueError, match="'reweight' applies to mode 'learning_progress' only"):
+        make_spec([{"task": "t.yaml"}], sampling={"mode": "uniform", "reweight": 0.1})

@@ -123,12 +123,14 @@ class CurriculumScheduler:
         # sub-task needs no sampler.
         self._samplers: list[list[LearningProgressSampler | None]] = [
             [
-                LearningProgressSampler(len(tasks))
-                if (phase.sampling or spec.sampling).mode == "learning_progress" and len(tasks) > 1
+                LearningProgressSampler(len(tasks), reweight=sampling.reweight)
+                if sampling.mode == "learning_progress" and len(tasks) > 1
                 else None
                 for _ in stages
             ]
-            for phase, stages, tasks in zip(spec.phases, self._stages, self._tasks)
+            for sampling, stages, tasks in zip(
+                (phase.sampling or spec.sampling for phase in spec.phases), self._stages, self._tasks
+            )
         ]
         # Statistics windows, kept across re-entries: every recorded episode of a stage, replayed
         # or stale included, and the same per sub-task. Sized like the phase's promotion window.

@@ -49,6 +49,16 @@ class SamplingSpec(StrictModel):
     """How sub-tasks of a task set (e.g. MT10) are chosen for each episode."""
 
     mode: Literal["uniform", "learning_progress"] = "uniform"
+    reweight: float | None = Field(default=None, gt=0.0, le=0.5)
+    """`learning_progress` only: Kanitscheider et al.'s p_θ, which stretches success near 0 before
+    the fast and slow averages are differenced, so sub-tasks whose success is low and rising get
+    the episodes (0.1 in the paper); null = plain |fast − slow|."""
+
+    @model_validator(mode="after")
+    def _reweight_needs_progress(self) -> SamplingSpec:
+        if self.reweight is not None and self.mode != "learning_progress":
+            raise ValueError(f"'reweight' applies to mode 'learning_progress' only (mode is '{self.mode}')")
+        return self
 
 
 class EvaluationSpec(StrictModel):
