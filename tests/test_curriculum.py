@@ -457,3 +457,12 @@ def test_the_scheduler_reweights_progress_toward_low_success_when_asked():
     assert share_of_low({"mode": "learning_progress", "reweight": 0.1}) > 0.75
     with pytest.raises(ValueError, match="'reweight' applies to mode 'learning_progress' only"):
         make_spec([{"task": "t.yaml"}], sampling={"mode": "uniform", "reweight": 0.1})
+
+
+def test_sampling_probabilities_say_where_the_next_episodes_go():
+    scheduler = make_scheduler([["solve"]], tasks=[TASKS], sampling={"mode": "learning_progress"}, promotion={"window": 10_000})
+    train_three_tasks(scheduler)
+    probabilities = scheduler.sampling_probabilities()
+    assert set(probabilities) == {f"0/solve/{t}" for t in TASKS} and sum(probabilities.values()) == pytest.approx(1.0)
+    assert max(probabilities, key=probabilities.get) == "0/solve/learning"
+    assert make_scheduler([["solve"]], tasks=[TASKS]).sampling_probabilities() == {}  # uniform: nothing to report

@@ -299,6 +299,16 @@ class CurriculumScheduler:
                         rates[f"{phase}/{stage_name}/{task_name}"] = _rate(window)
         return rates
 
+    def sampling_probabilities(self) -> dict[str, float]:
+        """Where learning-progress sampling sends the current stage's next episodes: keys
+        "phase/stage/sub-task", one per sub-task; empty when the current stage samples uniformly.
+        Logged so a run shows which sub-tasks got the episodes, not only how well each did."""
+        sampler = self._samplers[self._phase][self._stage]
+        if sampler is None:
+            return {}
+        prefix = f"{self._phase}/{self.stage}"
+        return {f"{prefix}/{name}": float(p) for name, p in zip(self._tasks[self._phase], sampler.probabilities())}
+
     # --- checkpointing --------------------------------------------------------------------------
 
     def state_dict(self) -> dict:

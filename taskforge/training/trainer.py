@@ -289,6 +289,7 @@ class _Session:
                             f"last update {sps:,.0f} steps/s (collect + learn)")
         return {"phase": self.scheduler.phase, "stage": self.scheduler.stage, "steps_per_s": sps,
                 **_episode_metrics(episodes), **{f"window_success/{k}": v for k, v in self.scheduler.success_rates().items()},
+                **{f"sampling/{k}": v for k, v in self.scheduler.sampling_probabilities().items()},
                 **losses}
 
     def where(self, phase: int, stage: str) -> str:
