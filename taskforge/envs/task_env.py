@@ -133,12 +133,6 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         return name
 
     @property
-    def task_names(self) -> list[str]:
-        """The sub-tasks this env can play (one name for a single task); a vector env's
-        `get_attr("task_names")` reads it through wrappers."""
-        return list(self.backend.task_names)
-
-    @property
     def max_episode_steps(self) -> int:
         return self.task.episode_steps(self.stages[self.stage].spec)
 

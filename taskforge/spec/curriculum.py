@@ -125,10 +125,6 @@ class DaggerSpec(StrictModel):
     """Env steps the student runs per round (all envs together); they count in the run's budget."""
     epochs: int = Field(default=20, ge=1)
     """Passes over the aggregate at each refit (warm-started from the previous fit)."""
-    allocation: Literal["uniform", "failures"] = "uniform"
-    """How a task set's sub-tasks share a round: `uniform`, each episode's sub-task drawn evenly;
-    `failures`, every round after the first draws them in proportion to the previous round's
-    student failures, a fifth still spread evenly (`training/dagger.py`)."""
 
 
 class FineTuneSpec(StrictModel):

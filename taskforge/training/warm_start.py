@@ -266,7 +266,7 @@ def _run_dagger(
             )
 
     try:
-        return dagger(agent, envs, demos, ws.dagger.rounds, ws.dagger.steps_per_round, refit, seed, report, ws.dagger.allocation)
+        return dagger(agent, envs, demos, ws.dagger.rounds, ws.dagger.steps_per_round, refit, seed, report)
     finally:
         envs.close()
 
