@@ -8,6 +8,8 @@ every task vs env steps, several seeds.
 Variants (each a curriculum; its `evaluation: {tasks: all}` plays every task on its held-out goals):
 - `mt10-warm`: curricula/mt10.yaml (2M env steps, the warm start's expert and DAgger steps counted);
 - `mt10-scratch`: benchmarks/configs/mt10_scratch.yaml, the same without the warm start;
+- `mt10-warm-reweighted`: benchmarks/configs/mt10_reweighted.yaml, `mt10-warm` with learning-progress
+  sampling reweighted toward low success (`sampling.reweight: 0.1`), the sampler's ablation;
 - `xarm7-variants`: curricula/xarm7_variants.yaml (1M env steps): nominal -> big cube -> high goals
   -> low table with replay of the earlier variants.
 The full budget (3 seeds of each: 15M env steps) spans sessions, so each call advances every run by
@@ -34,6 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 VARIANTS: dict[str, tuple[Path, int]] = {
     "mt10-warm": (ROOT / "curricula/mt10.yaml", 2_000_000),
     "mt10-scratch": (ROOT / "benchmarks/configs/mt10_scratch.yaml", 2_000_000),
+    "mt10-warm-reweighted": (ROOT / "benchmarks/configs/mt10_reweighted.yaml", 2_000_000),
     "xarm7-variants": (ROOT / "curricula/xarm7_variants.yaml", 1_000_000),
 }
 RUNS = ROOT / "benchmarks/runs/multi_task"
