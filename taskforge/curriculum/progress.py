@@ -25,7 +25,8 @@ Choices, and how they differ from the paper:
   R(p) = (1 − θ)·p / (p + θ·(1 − 2p)) before they are differenced. R maps [0, 1] onto itself;
   with θ = 0.1 its slope is 9 at p = 0 and 1/9 at p = 1, so the same change in success counts
   about 80 times more near 0 than near 1: episodes go where success is *low and rising*, not to a
-  solved task's noise (a task at 0.95 ± 0.05 kept most of MT10's episodes without it, RESULTS.md).
+  solved task's noise (MT10 from scratch: reach, solved at 0.95, drew most episodes with plain LP).
+  On warm-started MT10 it made no measurable difference (RESULTS.md, multi-task).
   θ = 0.5 is the identity. No z-score/sigmoid: proportional sampling is easy to reason about.
 - When no sub-task shows progress of at least `MIN_PROGRESS` (one percentage point between the two
   averages), sampling is uniform. Without this floor, LP/ΣLP normalises leftovers: MT10 from scratch
