@@ -13,14 +13,20 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 import yaml
+from gymnasium.spaces import Box
 
+from taskforge.agents import PPOAgent
 from taskforge.cli import main
+from taskforge.envs import load_task
+from taskforge.rollouts import evaluate, evaluate_rows
 from taskforge.run import load_checkpoint, read_jsonl, save_checkpoint
 from taskforge.training import train
-from tests.conftest import ROOT
+from tests.conftest import ROOT, TASKS
+from tests.test_agents_ppo import SMALL_PPO, agent_spec
 
 # Pendulum is a fast stand-in simulator; the curriculum logic is the same for every backend.
 TASK = {
@@ -358,15 +364,6 @@ def test_evaluating_sub_tasks_in_turn_on_shared_envs_matches_each_alone():
     """An MT10 evaluation plays each sub-task on one set of envs (fresh ones per sub-task built
     400 Meta-World envs per evaluation): a row must not depend on the rows played before it
     on those envs, and each row must play its own sub-task."""
-    import numpy as np
-    from gymnasium.spaces import Box
-
-    from taskforge.agents import PPOAgent
-    from taskforge.envs import load_task
-    from taskforge.rollouts import evaluate, evaluate_rows
-    from tests.conftest import TASKS
-    from tests.test_agents_ppo import SMALL_PPO, agent_spec
-
     mt10 = TASKS / "metaworld/mt10.yaml"
     spec = agent_spec(policy={"hidden_sizes": [32, 32]}, ppo=SMALL_PPO, runtime={"vector": "sync", "update_threads": 1})
     agent = PPOAgent(spec, Box(-np.inf, np.inf, (39 + 10,), np.float32), Box(-1.0, 1.0, (4,), np.float32), seed=0)

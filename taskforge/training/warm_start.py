@@ -242,13 +242,13 @@ def _run_dagger(
     envs = make_vector_env(fns, agent.spec.runtime)
 
     def refit(data: Labelled) -> dict[str, float]:
-        metrics = pretrain(
+        fit = pretrain(
             agent, data.observations, data.actions, epochs=ws.dagger.epochs, batch_size=ws.bc_batch_size,
             learning_rate=ws.bc_learning_rate, update_normalizer=False, progress=progress,
             episode_starts=data.episode_starts,
         )
         _set_exploration(agent, ws, data)  # the next round explores as PPO will
-        return metrics
+        return fit
 
     def report(k: int, batch: DaggerRound, refit_metrics: dict[str, float]) -> None:
         by_task = batch.success_by_task()
