@@ -39,6 +39,23 @@ def test_metaworld_policy_places_under_randomisation_with_the_goal_hidden():
     env.close()
 
 
+def test_metaworld_reach_policy_brings_the_scored_point_onto_the_goal():
+    """Meta-World scores reach at the fingertips' midpoint, 4.5 cm below the hand its policy
+    steers; aimed at the fingertips (`AIM_FINGERTIPS`) the policy ends on the goal, not 4.5 cm
+    from it at the edge of the 5 cm success radius."""
+    env = taskforge.make(TASKS / "metaworld/reach.yaml", split="test")
+    policy = scripted_policy(env)
+    assert isinstance(policy, MetaWorldPolicy)
+    for goal in range(3):
+        env.reset(seed=goal, options={"goal_index": goal})
+        for _ in range(150):
+            env.step(policy(env))
+        features = env.backend.features()
+        # Unaimed it ends at 0.045; the task's action noise and damping leave ~1 cm either way.
+        assert np.linalg.norm(features["tcp_pos"] - features["goal_pos"]) < 0.025, goal
+    env.close()
+
+
 @pytest.mark.parametrize("stage, behaviour", [("reach", "reach_object"), ("push", "push"), ("pick", "pick")])
 def test_waypoint_planner_succeeds_on_the_early_stages(stage, behaviour):
     env = taskforge.make(PICK_PLACE, stage=stage)
