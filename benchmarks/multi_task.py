@@ -12,8 +12,8 @@ Variants (each a curriculum; its `evaluation: {tasks: all}` plays every task on 
   sampling reweighted toward low success (`sampling.reweight: 0.1`), the sampler's ablation;
 - `mt10-warm-400x3`: benchmarks/configs/mt10_400x3.yaml, `mt10-warm` with a 3 x 400 policy instead
   of 2 x 256, the capacity ablation;
-- `mt10-warm-bc-constant`: benchmarks/configs/mt10_bc_constant.yaml, `mt10-warm` with the BC term
-  held at 0.01 instead of decaying to 0, the regulariser's ablation;
+- `mt10-warm-bc-decay`: benchmarks/configs/mt10_bc_decay.yaml, `mt10-warm` with DAPG's BC term
+  decaying to 0 instead of held at 0.01, the regulariser's ablation;
 - `xarm7-variants`: curricula/xarm7_variants.yaml (1M env steps): nominal -> big cube -> high goals
   -> low table with replay of the earlier variants.
 The full budget (3 seeds of each: 15M env steps) spans sessions, so each call advances every run by
@@ -42,7 +42,7 @@ VARIANTS: dict[str, tuple[Path, int]] = {
     "mt10-scratch": (ROOT / "benchmarks/configs/mt10_scratch.yaml", 2_000_000),
     "mt10-warm-reweighted": (ROOT / "benchmarks/configs/mt10_reweighted.yaml", 2_000_000),
     "mt10-warm-400x3": (ROOT / "benchmarks/configs/mt10_400x3.yaml", 2_000_000),
-    "mt10-warm-bc-constant": (ROOT / "benchmarks/configs/mt10_bc_constant.yaml", 2_000_000),
+    "mt10-warm-bc-decay": (ROOT / "benchmarks/configs/mt10_bc_decay.yaml", 2_000_000),
     "xarm7-variants": (ROOT / "curricula/xarm7_variants.yaml", 1_000_000),
 }
 RUNS = ROOT / "benchmarks/runs/multi_task"
