@@ -59,8 +59,8 @@ def test_metaworld_reach_policy_brings_the_scored_point_onto_the_goal():
 def test_metaworld_peg_policy_carries_a_gripped_peg_without_stalling():
     """Meta-World's peg-insert-side policy carries the peg only while it is <= 2.5 cm below the
     hand, and a gripped peg hangs 2.5-2.8 cm below it; on these train goals the policy as
-    shipped drags the peg over the table and fails. Told the gripped peg is held
-    (`HOLD_WHILE_GRIPPED`), it inserts it on each within 150 steps."""
+    shipped drags the peg over the table and fails. Reading the gripped peg as held
+    (`READ_AS_HELD`), it inserts it on each within 150 steps."""
     env = taskforge.make(TASKS / "metaworld/mt10.yaml", split="train")
     policy = MetaWorldPolicy(["peg-insert-side-v3"])
     for goal in (5, 23, 24):  # the shipped policy fails each of these (measured: no success in 500 steps)
@@ -71,6 +71,30 @@ def test_metaworld_peg_policy_carries_a_gripped_peg_without_stalling():
                 break
         assert info["success"], goal
     env.close()
+
+
+@pytest.mark.filterwarnings("ignore::UserWarning")  # `move()` warns when its gain saturates the action
+@pytest.mark.parametrize("name, goal_z", [("push-v3", 0.02), ("pick-place-v3", 0.2)])
+def test_metaworld_policy_carries_a_puck_gripped_off_centre(name, goal_z):
+    """A puck in closed fingers 3 cm off centre (as a clone grips it): Meta-World's policy as
+    shipped reads it as not held and goes up above it (push also lets go); read as held
+    (`READ_AS_HELD`), it carries the puck toward the goal and keeps gripping."""
+    from metaworld.policies import ENV_POLICY_MAP
+
+    from taskforge.demos.policies import READ_AS_HELD, _read_as_held
+
+    obs = np.zeros(39)
+    obs[0:3] = [0.0, 0.6, 0.074]  # hand
+    obs[3] = 0.45  # fingers closed on the puck
+    obs[4:7] = [0.03, 0.6, 0.02]  # puck
+    obs[36:39] = [0.0, 0.85, goal_z]  # goal, 25 cm ahead in y
+    policy = ENV_POLICY_MAP[name]()
+    shipped = policy.get_action(obs.copy())
+    assert shipped[2] > 0.3 and shipped[1] == pytest.approx(0.0)  # up, not toward the goal
+    held = obs.copy()
+    _read_as_held(held, READ_AS_HELD[name])
+    carried = policy.get_action(held)
+    assert carried[1] > 0.5 and carried[3] > 0.5, carried  # toward the goal, still gripping
 
 
 @pytest.mark.parametrize("stage, behaviour", [("reach", "reach_object"), ("push", "push"), ("pick", "pick")])
