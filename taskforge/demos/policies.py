@@ -281,12 +281,12 @@ the hand; push: the puck < 4 cm below and < 2 cm off in xy; pick-place: < 2 cm o
 real grasp sits on or beyond those edges: a gripped peg hangs 2.5-2.8 cm below the hand, and a
 puck gripped off-centre or high (as a student grips it) reads as not held. The policy then
 answers "descend onto it" or "go above it" to an object already in its fingers, pressing it into
-the table or lifting it away: peg-insert-side stalls on 33 of 40 train goals as shipped (35 of
-40 test goals), and off its own path, where DAgger asks it, every policy does worse (actions
-with Gaussian noise of std 0.6, 30 train goals: push 0.57, pick-place 0.57, peg-insert-side
-0.70). Read as held, the same policies score 40 of 40 on train and test goals (peg-insert-side)
-and 1.00 as before (push, pick-place), and with that noise 0.93, 0.73 and 0.83
-(benchmarks/RESULTS.md, multi-task). Meta-World's code still decides every action."""
+the table or lifting it away: peg-insert-side stalls on 7 of 40 train goals as shipped (5 of
+40 test goals), and off its own path, where DAgger asks it for labels, push and pick-place fail
+too. Read as held, the same policies score 1.00 on their own path, and with Gaussian noise on
+every action (std 0.3 / 0.6, 30 train goals) push 0.90 / 0.40 -> 1.00 / 0.97, pick-place
+0.87 / 0.57 -> 0.97 / 0.53, peg-insert-side 0.87 / 0.63 -> 0.97 / 0.70 (`benchmarks/teachers.py`).
+Meta-World's code still decides every action."""
 
 HELD_OPENING = 0.6
 """Gripper opening (`obs[3]`, 1 open) below which the fingers count as closed on the object:
