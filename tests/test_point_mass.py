@@ -75,6 +75,40 @@ def test_the_goal_is_hidden_and_the_reward_is_paid_only_near_it():
     assert not terminated and not truncated  # the episode runs its 20 steps
 
 
+def with_stage_rewards(tmp_path, rewards: list[dict]):
+    doc = yaml.safe_load(SEMICIRCLE.read_text())
+    doc["stages"][0]["rewards"] = rewards
+    path = tmp_path / "task.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_progress_pays_only_for_beating_the_episode_record(tmp_path):
+    path = with_stage_rewards(tmp_path, [{"term": "tcp_to_goal_progress", "weight": 10.0}])
+    env = TaskEnv(load_task(path), path)
+    for episode in range(2):  # the record starts again with every episode, as in an RL² trial
+        env.reset(options={"goal_index": 3} if episode == 0 else {"same_task": True})
+        goal = env.features()["goal_pos"][:2]
+        start = np.linalg.norm(goal)
+        toward = (goal / np.abs(goal).max()).astype(np.float32)  # a full step along the larger axis
+        paid, distances = [], []
+        for action in [toward] * 3 + [-toward] * 2 + [toward] * 3:  # in, back out, in again past the record
+            _, reward, *_, info = env.step(action)
+            paid.append(reward)
+            distances.append(np.linalg.norm(env.features()["tcp_pos"][:2] - goal))
+        assert all(r > 0 for r in paid[:3]) and paid[3:6] == [0.0] * 3  # out and back up to the record: nothing
+        assert paid[6] == 0.0 or distances[6] < min(distances[:6])
+        assert paid[7] > 0 and info["reward_terms"]["tcp_to_goal_progress"] == pytest.approx(paid[7] / 10.0)
+        assert sum(paid) == pytest.approx(10.0 * (start - min(distances)))  # the episode's sum: start - closest
+
+
+def test_a_progress_term_needs_its_distance_from_the_backend(tmp_path, capsys):
+    path = with_stage_rewards(tmp_path, [{"term": "object_to_goal_progress", "weight": 1.0}])
+    assert main(["validate", "--kind", "task", str(path)]) == 2
+    (line,) = [line for line in capsys.readouterr().err.splitlines() if line]
+    assert line.startswith(f"error: {path}: stages[0].rewards[0].term: term 'object_to_goal_progress' reads object_to_goal_progress"), line
+
+
 def test_distance_scale_brings_the_goal_towards_the_start(tmp_path):
     doc = yaml.safe_load(SEMICIRCLE.read_text())
     doc["stages"][0]["goal"] = {"distance_scale": 0.5}

@@ -51,6 +51,8 @@ def test_indicator_and_passthrough_terms():
     assert term_value("grasp", features(object_grasped=1.0)) == 1.0
     assert term_value("native", features(native_reward=3.25)) == 3.25
     assert term_value("stage_success", features(stage_success=1.0)) == 1.0
+    assert term_value("tcp_to_goal_progress", features(tcp_to_goal_progress=0.01)) == 0.01
+    assert term_value("object_to_goal_progress", features(object_to_goal_progress=0.02)) == 0.02
     assert term_value("action_l2", features(action=np.array([1.0, -2.0, 0.0, 2.0]))) == pytest.approx(9.0)
 
 

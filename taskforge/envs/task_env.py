@@ -21,7 +21,7 @@ from taskforge.backends import Backend, GoalOverride, Split, make_backend
 from taskforge.backends.mujoco_common import diverged
 from taskforge.randomization import ActionBacklash, ActionLatency, AdditiveNoise, PhysicsRandomizer
 from taskforge.spec import SpecError, TaskSpec, expected_one_of
-from taskforge.terms import FEATURES, NATIVE_FEATURES, CompiledStage, Features
+from taskforge.terms import FEATURES, NATIVE_FEATURES, PROGRESS_FEATURES, CompiledStage, Features
 
 SPLITS: tuple[Split, ...] = ("train", "test")
 RELATIVE_FEATURES = frozenset({"tcp_pos", "object_pos", "goal_pos"})
@@ -118,6 +118,10 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._episode: dict[str, Any] = {}
         self._t = 0
         self._ever_success = False
+        self._progress = {p: d for p, d in PROGRESS_FEATURES.items() if d in self.backend.provides}
+        """Progress features this backend allows, each with its distance."""
+        self._closest: dict[str, float] = {}
+        """Each progress feature's record: the smallest distance so far this episode."""
 
     # -- configuration ------------------------------------------------------------------------
 
@@ -185,6 +189,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._physics_draw = physics_draw
         features = self.backend.features()
         features["action"] = np.zeros(self.action_space.shape[0])
+        self._closest = {p: features[d] for p, d in self._progress.items()}
+        features.update(dict.fromkeys(self._progress, 0.0))
         info = self._info(features, stage.success(features), {})
         return self._observe(obs, features), info
 
@@ -200,6 +206,10 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
 
         features = self.backend.features()
         features["action"] = chosen
+        for feature, distance in self._progress.items():
+            now, record = features[distance], self._closest[feature]
+            features[feature] = max(0.0, record - now)
+            self._closest[feature] = min(record, now)
         stage = self.stages[self.stage]
         success = stage.success(features)
         features["stage_success"] = float(success)

@@ -39,15 +39,32 @@ FEATURES: dict[str, FeatureInfo] = {
     "native_success": FeatureInfo(1, "the simulator suite's own success flag (Meta-World's `success`)"),
     "native_return": FeatureInfo(1, "sum of `native_reward` so far this episode (e.g. LunarLander 'solved' at 200)"),
     "stage_success": FeatureInfo(1, "1 when the current stage's success condition holds"),
+    "tcp_to_goal_progress": FeatureInfo(1, "how much closer (m) the tool came to the goal this step than ever before in the episode; 0 when it did not"),
+    "object_to_goal_progress": FeatureInfo(1, "how much closer (m) the object came to the goal this step than ever before in the episode; 0 when it did not"),
 }
 
-GOAL_FEATURES = frozenset({"goal_pos", "object_to_goal_distance", "tcp_to_goal_distance", "native_success"})
+PROGRESS_FEATURES: dict[str, str] = {
+    "tcp_to_goal_progress": "tcp_to_goal_distance",
+    "object_to_goal_progress": "object_to_goal_distance",
+}
+"""Record-distance features and the distance each follows. The env fills them (it alone sees
+the episode's history) on any backend that provides the distance. Why: a term of the current
+distance pays for *being* near the goal, so with the goal hidden, hovering mid-box out-earns a
+search; a term of the record pays only for coming nearer than before, so over an episode it
+sums to start distance - closest distance, which a sweep that passes the goal maximises."""
+GOAL_FEATURES = frozenset({"goal_pos", "object_to_goal_distance", "tcp_to_goal_distance", "native_success", *PROGRESS_FEATURES})
 """Features that depend on where the goal is (Meta-World's own success flag measures to its goal):
 a success condition on one of them cannot be met on a held-out goal the policy neither sees nor
 can infer."""
 NATIVE_FEATURES = frozenset({"native_reward", "native_success", "native_return"})
 """The simulator suite's own reward and success: a backend may skip computing them (Meta-World:
 ~40 % of its step) unless a stage reads one (`Backend.native`)."""
-ENV_FEATURES = frozenset({"action", "stage_success"})
-"""Filled by the env itself on every backend."""
+ENV_FEATURES = frozenset({"action", "stage_success", *PROGRESS_FEATURES})
+"""Filled by the env itself: `action` and `stage_success` on every backend, a progress feature
+where the backend provides its distance (`env_features`)."""
 SCALAR_FEATURES = frozenset(name for name, info in FEATURES.items() if info.size == 1)
+
+
+def env_features(provides: frozenset[str]) -> frozenset[str]:
+    """The features the env adds on a backend that `provides` these."""
+    return frozenset({"action", "stage_success"} | {p for p, d in PROGRESS_FEATURES.items() if d in provides})

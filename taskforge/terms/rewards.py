@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pydantic import Field
 
 from taskforge.spec import StrictModel
-from taskforge.terms.features import Features
+from taskforge.terms.features import PROGRESS_FEATURES, Features
 from taskforge.terms.kernels import KERNELS, KernelName
 
 
@@ -77,6 +77,20 @@ for _name, _feature in (
     ("tcp_to_goal", "tcp_to_goal_distance"),
 ):
     reward_term(_name, (_feature,), DistanceParams)(_distance_term(_feature))
+
+
+def _progress_term(feature: str, distance: str) -> TermFn:
+    def term(f: Features, p: NoParams) -> float:
+        return f[feature]
+
+    term.__doc__ = (f"`{feature}`: metres by which `{distance}` beat its episode record this step (>= 0). "
+                    "Sums to start distance - closest distance over an episode: pays for a search that "
+                    "passes the goal, not for hovering near where it might be (give it a weight per metre).")
+    return term
+
+
+for _feature, _distance in PROGRESS_FEATURES.items():
+    reward_term(_feature, (_feature,))(_progress_term(_feature, _distance))
 
 
 @reward_term("lift", ("object_height",), LiftParams)

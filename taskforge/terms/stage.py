@@ -15,7 +15,7 @@ from pydantic import ValidationError
 from taskforge.spec import SpecError, SpecIssue, StageSpec, StrictModel, TaskSpec, expected_one_of
 from taskforge.spec.errors import issues_from_validation
 from taskforge.spec.loader import field_names_at
-from taskforge.terms.features import ENV_FEATURES, FEATURES, SCALAR_FEATURES, Features
+from taskforge.terms.features import FEATURES, SCALAR_FEATURES, Features, env_features
 from taskforge.terms.rewards import REWARD_TERMS, TermFn
 
 
@@ -116,7 +116,7 @@ def task_issues(task: TaskSpec, file: str | Path, provides: frozenset[str] | Non
         issues += stage_issues(stage, file, f"stages[{i}]")
     if provides is None or issues:
         return issues
-    available = provides | ENV_FEATURES
+    available = provides | env_features(provides)
     for i, stage in enumerate(task.stages):
         for j, term_spec in enumerate(stage.rewards):
             missing = [f for f in REWARD_TERMS[term_spec.term].reads if f not in available]
