@@ -85,6 +85,7 @@ def meta_evaluate(
         entry = {"step": step, "split": split, "trials": trials, "sampled": sampled, "success_rate": row["success_rate"],
                  "per_episode": [e["success_rate"] for e in row["per_episode"]],
                  "per_episode_return": [e["mean_return"] for e in row["per_episode"]],
+                 "per_episode_length": [e["mean_length"] for e in row["per_episode"]],
                  "after_first_episode": row.get("after_first_episode")}
         with cache.open("a") as f:
             f.write(json.dumps(entry) + "\n")

@@ -76,8 +76,12 @@ class StageResult:
         successes = np.asarray(self.successes, dtype=bool).reshape(-1, self.trial_episodes)
         returns = np.asarray(self.returns, dtype=float).reshape(-1, self.trial_episodes)
         lengths = np.asarray(self.lengths, dtype=float).reshape(-1, self.trial_episodes)
-        per_episode = [  # the adaptation curve: episode k of every trial
-            {"episode": k + 1, **_rate(successes[:, k]), "mean_return": float(returns[:, k].mean()) if self.trials else 0.0}
+        # the adaptation curve: episode k of every trial. Its length too: where episodes end at
+        # success (`terminate_on_success`), an agent that returns to a goal it found shows it as
+        # shorter later episodes before (or without) a rise in success.
+        per_episode = [
+            {"episode": k + 1, **_rate(successes[:, k]), "mean_return": float(returns[:, k].mean()) if self.trials else 0.0,
+             "mean_length": float(lengths[:, k].mean()) if self.trials else 0.0}
             for k in range(self.trial_episodes)
         ]
         row = {

@@ -297,6 +297,7 @@ def test_rl2_runs_a_curriculum_and_its_meta_test_report_has_the_adaptation_curve
         assert 0.0 <= e["success_ci95"][0] <= e["success_rate"] <= e["success_ci95"][1] <= 1.0
     assert np.mean([e["success_rate"] for e in row["per_episode"]]) == pytest.approx(row["success_rate"])
     assert np.mean([e["mean_return"] for e in row["per_episode"]]) == pytest.approx(row["mean_return"])
+    assert [e["mean_length"] for e in row["per_episode"]] == [100, 100, 100]  # no success ends one early here
 
     assert main(["plot", str(out), "--out", str(tmp_path / "adapt.png")]) == 0
     assert (tmp_path / "adapt.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
