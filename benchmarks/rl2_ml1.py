@@ -2,8 +2,8 @@
 several seeds, and the adaptation curve (success at episode 1..K of a trial on held-out goals)
 of RL² next to a memoryless PPO baseline.
 
-    python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-observed rl2-reach-plane rl2-reach-found
-                                 rl2-reach-found-explore rl2-reach-found-short ppo-reach ppo-reach-progress ppo-reach-found rl2-push ppo-push rl2-pick-place]
+    python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
+                                 rl2-reach-found-explore rl2-reach-found-short ppo-reach rl2-push ppo-push rl2-pick-place]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
 
 The full budget takes many hours on 2 cores, so the script works in chunks (like
@@ -48,14 +48,11 @@ VARIANTS = {
     "rl2-reach-sparse": ROOT / "benchmarks/configs/ml1_reach_rl2_sparse.yaml",
     "rl2-reach-linear": ROOT / "benchmarks/configs/ml1_reach_rl2_linear.yaml",
     "rl2-reach-progress": ROOT / "benchmarks/configs/ml1_reach_rl2_progress.yaml",
-    "rl2-reach-observed": ROOT / "benchmarks/configs/ml1_reach_rl2_observed.yaml",
     "rl2-reach-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_plane.yaml",
     "rl2-reach-found": ROOT / "benchmarks/configs/ml1_reach_rl2_found.yaml",
     "rl2-reach-found-explore": ROOT / "benchmarks/configs/ml1_reach_rl2_found_explore.yaml",
     "rl2-reach-found-short": ROOT / "benchmarks/configs/ml1_reach_rl2_found_short.yaml",
     "ppo-reach": ROOT / "benchmarks/configs/ml1_reach_ppo.yaml",
-    "ppo-reach-progress": ROOT / "benchmarks/configs/ml1_reach_ppo_progress.yaml",
-    "ppo-reach-found": ROOT / "benchmarks/configs/ml1_reach_ppo_found.yaml",
     "rl2-push": ROOT / "benchmarks/configs/ml1_push_rl2.yaml",
     "ppo-push": ROOT / "benchmarks/configs/ml1_push_ppo.yaml",
     "rl2-pick-place": ROOT / "benchmarks/configs/ml1_pick_place_rl2.yaml",
