@@ -118,8 +118,9 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._episode: dict[str, Any] = {}
         self._t = 0
         self._ever_success = False
-        self._progress = {p: d for p, d in PROGRESS_FEATURES.items() if d in self.backend.provides}
-        """Progress features this backend allows, each with its distance."""
+        read = frozenset().union(*(s.reads for s in self.stages.values()))
+        self._progress = {p: d for p, d in PROGRESS_FEATURES.items() if p in read and d in self.backend.provides}
+        """Progress features some stage reads, each with its distance: only they cost a step."""
         self._closest: dict[str, float] = {}
         """Each progress feature's record: the smallest distance so far this episode."""
 

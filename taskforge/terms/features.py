@@ -59,12 +59,14 @@ can infer."""
 NATIVE_FEATURES = frozenset({"native_reward", "native_success", "native_return"})
 """The simulator suite's own reward and success: a backend may skip computing them (Meta-World:
 ~40 % of its step) unless a stage reads one (`Backend.native`)."""
-ENV_FEATURES = frozenset({"action", "stage_success", *PROGRESS_FEATURES})
-"""Filled by the env itself: `action` and `stage_success` on every backend, a progress feature
-where the backend provides its distance (`env_features`)."""
+STEP_FEATURES = frozenset({"action", "stage_success"})
+"""Filled by the env itself on every backend."""
+ENV_FEATURES = STEP_FEATURES | frozenset(PROGRESS_FEATURES)
+"""Filled by the env itself: `STEP_FEATURES` on every backend, a progress feature where the
+backend provides its distance (`env_features`)."""
 SCALAR_FEATURES = frozenset(name for name, info in FEATURES.items() if info.size == 1)
 
 
 def env_features(provides: frozenset[str]) -> frozenset[str]:
     """The features the env adds on a backend that `provides` these."""
-    return frozenset({"action", "stage_success"} | {p for p, d in PROGRESS_FEATURES.items() if d in provides})
+    return STEP_FEATURES | {p for p, d in PROGRESS_FEATURES.items() if d in provides}
