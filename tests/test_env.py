@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 import taskforge
 from taskforge import SpecError
 from taskforge.envs import TaskEnv
-from taskforge.spec import TaskSpec
+from taskforge.spec import TaskSpec, load_task_spec
 from tests.conftest import PICK_PLACE, TASKS
 
 STAGES = ["reach", "push", "pick", "place"]
@@ -284,3 +284,38 @@ def test_relative_positions_need_the_position_features(tmp_path):
            "observation": {"relative_positions": True}}
     with pytest.raises(SpecError, match="observation.relative_positions: the gymnasium backend does not provide goal_pos, object_pos, tcp_pos"):
         env_from(doc)
+
+
+@pytest.mark.parametrize("task_file", [PICK_PLACE, TASKS / "xarm7/pick_place.yaml"])
+def test_observation_features_replace_the_backends_observation(task_file):
+    doc = yaml.safe_load(task_file.read_text())
+    doc["randomization"] = {}  # no noise: the observation is the features exactly
+    doc["goals"]["observable"] = False
+    doc["observation"] = {"features": ["tcp_pos", "gripper_opening"], "relative_positions": True}
+    env = env_from(doc, stage="place")
+    assert env.observation_space.shape == (3 + 1 + 6,)
+    obs, _ = env.reset(seed=0)
+    for _ in range(5):
+        obs = env.step(env.action_space.sample())[0]
+    f = env.features()
+    np.testing.assert_allclose(obs[:3], f["tcp_pos"], atol=1e-5)
+    np.testing.assert_allclose(obs[3], f["gripper_opening"], atol=1e-5)
+    np.testing.assert_allclose(obs[4:7], f["object_pos"] - f["tcp_pos"], atol=1e-5)
+    assert np.all(obs[7:] == 0.0)  # goal - object stays hidden with the goal
+    check_env(env, skip_render_check=True)
+
+
+def test_observation_features_refuse_unknown_names_and_a_hidden_goal(pick_place_doc, tmp_path):
+    doc = copy.deepcopy(pick_place_doc)
+    doc["observation"] = {"features": ["tcp_pos", "tcp_position"]}
+    with pytest.raises(SpecError, match=r"observation.features\[1\]: 'tcp_position' is not a feature .* expected one of .*tcp_pos"):
+        env_from(doc)
+    doc["goals"]["observable"] = False
+    doc["observation"] = {"features": ["tcp_pos", "tcp_to_goal_distance"]}
+    with pytest.raises(SpecError, match=r"observation.features\[1\]: 'tcp_to_goal_distance' depends on the goal, which this task hides"):
+        env_from(doc)
+    for bad, message in (([], "at least one feature"), (["tcp_pos", "tcp_pos"], "listed twice: tcp_pos")):
+        doc["observation"] = {"features": bad}
+        (tmp_path / "task.yaml").write_text(yaml.safe_dump(doc))
+        with pytest.raises(SpecError, match=f"task.yaml: observation.features: .*{message}"):
+            load_task_spec(tmp_path / "task.yaml")

@@ -21,7 +21,7 @@ from taskforge.backends import Backend, GoalOverride, Split, make_backend
 from taskforge.backends.mujoco_common import diverged
 from taskforge.randomization import ActionBacklash, ActionLatency, AdditiveNoise, PhysicsRandomizer
 from taskforge.spec import SpecError, TaskSpec, expected_one_of
-from taskforge.terms import FEATURES, NATIVE_FEATURES, PROGRESS_FEATURES, CompiledStage, Features
+from taskforge.terms import FEATURES, GOAL_FEATURES, NATIVE_FEATURES, PROGRESS_FEATURES, CompiledStage, Features
 
 SPLITS: tuple[Split, ...] = ("train", "test")
 RELATIVE_FEATURES = frozenset({"tcp_pos", "object_pos", "goal_pos"})
@@ -85,7 +85,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self.stages = {s.name: CompiledStage(s, file, f"stages[{i}]") for i, s in enumerate(task.stages)}
         self.stage = self._check_stage(stage or task.stages[0].name)
         if native is None:
-            native = any(s.reads & NATIVE_FEATURES for s in self.stages.values())
+            native = any(s.reads & NATIVE_FEATURES for s in self.stages.values()) or bool(NATIVE_FEATURES & set(task.observation.features or ()))
         self.backend.native = native
         self.task_name = self._check_task_name(task_name)
         # One per sub-task with a MuJoCo model (other backends' checks reject physics terms),
@@ -102,7 +102,9 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._relative and not RELATIVE_FEATURES <= self.backend.provides:
             missing = ", ".join(sorted(RELATIVE_FEATURES - self.backend.provides))
             raise SpecError.single(file, "observation.relative_positions", f"the {task.backend.type} backend does not provide {missing}")
-        obs_size = self.backend.obs_size + (RELATIVE_SIZE if self._relative else 0)
+        self._observed = self._check_observed(task.observation.features)
+        base_size = sum(FEATURES[f].size for f in self._observed) if self._observed else self.backend.obs_size
+        obs_size = base_size + (RELATIVE_SIZE if self._relative else 0)
         self._obs_noise = AdditiveNoise(rand.observation_noise, obs_size)
         self._act_noise = AdditiveNoise(rand.action_noise, n_act)
         self._latency = ActionLatency(rand.action_latency, n_act)
@@ -125,6 +127,20 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         """Each progress feature's record: the smallest distance so far this episode."""
 
     # -- configuration ------------------------------------------------------------------------
+
+    def _check_observed(self, names: list[str] | None) -> tuple[str, ...]:
+        """`observation.features`, checked against what this backend fills every step (with a
+        known size) and, with the goal hidden, against the features that would reveal it."""
+        if names is None:
+            return ()
+        valid = {n for n in self.backend.provides if FEATURES[n].size > 0}
+        for i, name in enumerate(names):
+            field = f"observation.features[{i}]"
+            if name not in valid:
+                raise SpecError.single(self.file, field, f"'{name}' is not a feature the {self.task.backend.type} backend observes; {expected_one_of(name, valid)}")
+            if not self.task.goals.observable and name in GOAL_FEATURES:
+                raise SpecError.single(self.file, field, f"'{name}' depends on the goal, which this task hides (goals.observable: false)")
+        return tuple(names)
 
     def _check_stage(self, stage: str) -> str:
         if stage not in self.stages:
@@ -243,12 +259,15 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         return obs, 0.0, False, True, info
 
     def _observe(self, obs: np.ndarray, features: Features) -> np.ndarray:
+        if self._observed:  # only the named features (see ObservationSpec.features); none reveals a hidden goal
+            obs = np.concatenate([np.atleast_1d(features[f]) for f in self._observed]).astype(np.float64)
         if self._relative:  # object - tool, goal - object (see ObservationSpec.relative_positions)
             tcp, obj, goal = features["tcp_pos"], features["object_pos"], features["goal_pos"]
             obs = np.concatenate([obs, obj - tcp, goal - obj])
         obs = self._obs_noise(obs, self.np_random)
         if self._hide_goal:
-            obs[self.backend.goal_slice] = 0.0
+            if not self._observed:
+                obs[self.backend.goal_slice] = 0.0
             if self._relative:
                 obs[-3:] = 0.0  # goal - object would give the hidden goal away
         return obs.astype(np.float32)

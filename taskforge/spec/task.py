@@ -165,6 +165,23 @@ class ObservationSpec(StrictModel):
     teachers act on these differences; a policy given only absolute positions must learn the
     subtraction from 50 training configurations, and generalises poorly to held-out ones
     (xArm7 pick-place, behaviour cloning on 50 demos: 0.68 held-out without, 0.96 with)."""
+    features: list[str] | None = None
+    """Observe only these named features (e.g. `[tcp_pos, gripper_opening]`), concatenated in
+    this order, instead of the backend's own observation. Why: Meta-World's 39 numbers hold a
+    second object, quaternions and the previous frame; for a recurrent policy that must remember
+    one place, each is input it has to learn to ignore. With the goal hidden, features that
+    depend on the goal are refused (they would give it away)."""
+
+    @field_validator("features")
+    @classmethod
+    def _features_unique(cls, features: list[str] | None) -> list[str] | None:
+        if features is not None:
+            if not features:
+                raise ValueError("list at least one feature, or leave `features` out for the backend's own observation")
+            dupes = sorted({f for f in features if features.count(f) > 1})
+            if dupes:
+                raise ValueError(f"features listed twice: {', '.join(dupes)}")
+        return features
 
 
 # --- the task file -------------------------------------------------------------------------
