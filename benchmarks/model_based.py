@@ -6,7 +6,8 @@ Meta-World with the goal observable: held-out success vs env steps, and wall-clo
 
 Variants (benchmarks/configs/, one file each) and the goals of issue 23:
 - `mpc-reach` / `ppo-reach`: reach, 50k steps; MPC >= 0.90 held-out within 50k;
-- `mpc-push` / `ppo-push`: push, 200k; MPC >= 0.95 within 200k;
+- `mpc-push` / `ppo-push`: push, 200k; MPC >= 0.95 within 200k; `mpc-push-value` the same with
+  a terminal value at the plan's end (agents/mpc_value.yaml);
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py);
 - `mpc-pick-place-demos`: the same with 50 scripted episodes seeding the model, 100k; >= 0.95
@@ -33,10 +34,10 @@ from taskforge.run import RunDir  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "benchmarks/configs"
 VARIANTS = {name: CONFIGS / f"{name.replace('-', '_')}.yaml" for name in (
-    "mpc-reach", "ppo-reach", "mpc-push", "ppo-push", "mpc-pick-place", "mpc-pick-place-demos")}
-BUDGET = {"mpc-reach": 50_000, "ppo-reach": 50_000, "mpc-push": 200_000, "ppo-push": 200_000,
+    "mpc-reach", "ppo-reach", "mpc-push", "mpc-push-value", "ppo-push", "mpc-pick-place", "mpc-pick-place-demos")}
+BUDGET = {"mpc-reach": 50_000, "ppo-reach": 50_000, "mpc-push": 200_000, "mpc-push-value": 200_000, "ppo-push": 200_000,
           "mpc-pick-place": 1_000_000, "mpc-pick-place-demos": 100_000}
-GOAL = {"mpc-reach": 0.90, "mpc-push": 0.95, "mpc-pick-place": 0.80, "mpc-pick-place-demos": 0.95}
+GOAL = {"mpc-reach": 0.90, "mpc-push": 0.95, "mpc-push-value": 0.95, "mpc-pick-place": 0.80, "mpc-pick-place-demos": 0.95}
 RUNS = ROOT / "benchmarks/runs/model_based"
 
 
@@ -45,14 +46,19 @@ def curve(run_dir: Path) -> list[tuple[int, float]]:
     return [(m["step"], m["eval_success_rate"]) for m in RunDir(run_dir).read_metrics() if "eval_success_rate" in m]
 
 
+def task_of(variant: str) -> str:
+    """The task a variant runs (`mpc-push-value` -> `push`): one plot panel each."""
+    return variant.split("-", 1)[1].removesuffix("-value")
+
+
 def plot(runs: dict[str, dict], out: Path) -> Path:
     """One panel per task: every run's held-out success vs env steps, MPC solid, PPO dashed."""
     plt = pyplot()
-    tasks = sorted({r["variant"].split("-", 1)[1] for r in runs.values()})
+    tasks = sorted({task_of(r["variant"]) for r in runs.values()})
     fig, axes = plt.subplots(1, max(len(tasks), 1), figsize=(4.5 * max(len(tasks), 1), 3.5), squeeze=False)
     for ax, task in zip(axes[0], tasks):
         for name, run in runs.items():
-            if run["variant"].split("-", 1)[1] == task and run["curve"]:
+            if task_of(run["variant"]) == task and run["curve"]:
                 steps, success = zip(*run["curve"])
                 ax.plot(steps, success, "-" if run["variant"].startswith("mpc") else "--", marker=".", label=name)
         ax.set_title(task)

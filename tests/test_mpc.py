@@ -12,6 +12,7 @@ import yaml
 
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan
+from taskforge.agents.value import TerminalValue
 from taskforge.cli import main
 from taskforge.demos import record, save
 from taskforge.envs import TaskEnv, load_task
@@ -55,6 +56,25 @@ def test_the_ensemble_learns_dynamics_and_reward_and_knows_its_noise():
     assert 0.005 < predicted_std < 0.02, predicted_std
 
 
+def test_the_terminal_value_learns_the_discounted_sum_of_rewards():
+    """A state that stays put and pays r = s every step is worth s / (1 - discount) = 10 s: TD(0)
+    with a target network gets there from transitions alone, to within a few percent."""
+    gen = torch.Generator().manual_seed(0)
+    value = TerminalValue(1, [32, 32], discount=0.9, tau=0.05, generator=gen)
+    s = torch.rand((2000, 1), generator=gen)
+    optimizer = torch.optim.Adam(value.net.parameters(), lr=3e-3)
+    metrics = value.fit(s, s[:, 0], s, s.mean(0), s.std(0), optimizer, updates=3000, batch=256, generator=gen)
+    probe = torch.linspace(0.05, 0.95, 10)[:, None]
+    with torch.no_grad():
+        np.testing.assert_allclose(value(probe).numpy(), 10 * probe[:, 0].numpy(), atol=0.3)
+    assert 4.0 < metrics["value_mean"] < 6.0  # 10 x the mean state, 0.5
+
+
+def test_a_terminal_value_needs_a_discount():
+    with pytest.raises(ValueError, match="'terminal_value' needs 'discount' < 1"):
+        MPCSpec(terminal_value=True)
+
+
 @pytest.mark.parametrize("planner", ["cem", "mppi", "random_shooting"])
 def test_each_planner_finds_the_best_sequence_of_a_known_return(planner):
     """Return = -sum_t (a_t - target_t)^2 with a different target per env: CEM and MPPI converge
@@ -89,9 +109,9 @@ AGENT = {
 }
 
 
-def write(folder, total_steps: int, **curriculum) -> object:
+def write(folder, total_steps: int, mpc: dict | None = None, **curriculum) -> object:
     (folder / "task.yaml").write_text(yaml.safe_dump(TASK))
-    (folder / "agent.yaml").write_text(yaml.safe_dump(AGENT))
+    (folder / "agent.yaml").write_text(yaml.safe_dump({**AGENT, "mpc": {**AGENT["mpc"], **(mpc or {})}}))
     doc = {"name": "mpc-point", "agent": "agent.yaml", "total_steps": total_steps, "phases": [{"task": "task.yaml"}],
            "evaluation": {"every_steps": 1200, "episodes": 20, "split": "test"}, "checkpoint": {"every_steps": 400}, **curriculum}
     path = folder / "curriculum.yaml"
@@ -99,11 +119,13 @@ def write(folder, total_steps: int, **curriculum) -> object:
     return path
 
 
-def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(tmp_path, capsys):
+@pytest.mark.parametrize("mpc", [{}, {"terminal_value": True, "discount": 0.95}], ids=["model-only", "terminal-value"])
+def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(tmp_path, capsys, mpc):
     """400 random steps, then planning with the model refitted every 400 steps: the held-out goals
     (20, on the semicircle, 1 m away, within 0.1 m) are reached within 2,000 steps, where random
-    actions never do. Then `--resume` continues with the model's data, and `taskforge eval` plays it."""
-    cur = write(tmp_path, total_steps=1600)
+    actions never do. Then `--resume` continues with the model's data (and the terminal value's
+    weights), and `taskforge eval` plays it."""
+    cur = write(tmp_path, total_steps=1600, mpc=mpc)
     run = train(cur, run_dir=tmp_path / "run", progress=False)
     first = read_jsonl(run / "metrics.jsonl")
     assert first[0]["step"] == 400 and first[0]["buffer_size"] == 400.0
@@ -112,6 +134,8 @@ def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(t
     assert [m["step"] for m in metrics] == [400, 800, 1200, 1600, 2000, 2400]
     assert metrics[-1]["buffer_size"] == 2400.0  # the data survived the resume
     assert metrics[-1]["model_obs_mse"] < 1e-3
+    if mpc:  # the value of a policy that closes in on the goal: negative, rising toward 0 over the run
+        assert metrics[-1]["value_mean"] < 0 and metrics[-1]["value_loss"] < metrics[0]["value_loss"]
     out = tmp_path / "eval.json"
     assert main(["eval", str(run), "--episodes", "20", "--out", str(out)]) == 0
     (row,) = json.loads(out.read_text())["rows"]

@@ -55,14 +55,16 @@ class EnsembleLinear(nn.Module):
         return torch.baddbmm(self.bias, x, self.weight)
 
 
-def _mlp(members: int, sizes: list[int], outputs: int, generator: torch.Generator) -> nn.ModuleList:
+def ensemble_mlp(members: int, sizes: list[int], outputs: int, generator: torch.Generator) -> nn.ModuleList:
+    """`members` MLPs of layer sizes `sizes` then `outputs`, as one stack of `EnsembleLinear`s."""
     return nn.ModuleList(
         [EnsembleLinear(members, a, b, generator) for a, b in zip(sizes[:-1], sizes[1:])]
         + [EnsembleLinear(members, sizes[-1], outputs, generator)]
     )
 
 
-def _run(layers: nn.ModuleList, x: torch.Tensor) -> torch.Tensor:
+def run_mlp(layers: nn.ModuleList, x: torch.Tensor) -> torch.Tensor:
+    """`ensemble_mlp`'s layers on `[members, n, in]`, SiLU between them."""
     for layer in layers[:-1]:
         x = F.silu(layer(x))
     return layers[-1](x)
@@ -76,8 +78,8 @@ class DynamicsEnsemble(nn.Module):
         super().__init__()
         self.members, self.obs_size = spec.ensemble_size, obs_size
         sizes = [obs_size + action_size, *spec.hidden_sizes]
-        self.dynamics = _mlp(self.members, sizes, 2 * obs_size, generator)
-        self.reward = _mlp(self.members, sizes, 1, generator)
+        self.dynamics = ensemble_mlp(self.members, sizes, 2 * obs_size, generator)
+        self.reward = ensemble_mlp(self.members, sizes, 1, generator)
         self.max_logvar = nn.Parameter(torch.full((1, 1, obs_size), 0.5))
         self.min_logvar = nn.Parameter(torch.full((1, 1, obs_size), -10.0))
         for name, size in (("in", obs_size + action_size), ("out", obs_size + 1)):
@@ -94,10 +96,10 @@ class DynamicsEnsemble(nn.Module):
     def forward(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Standardised `[members, n, obs + action]` -> the standardised observation change's
         mean and log-variance (`[members, n, obs]` each) and the standardised reward `[members, n]`."""
-        mean, logvar = _run(self.dynamics, inputs).chunk(2, dim=-1)
+        mean, logvar = run_mlp(self.dynamics, inputs).chunk(2, dim=-1)
         logvar = self.max_logvar - F.softplus(self.max_logvar - logvar)  # soft bounds (module doc)
         logvar = self.min_logvar + F.softplus(logvar - self.min_logvar)
-        return mean, logvar, _run(self.reward, inputs)[..., 0]
+        return mean, logvar, run_mlp(self.reward, inputs)[..., 0]
 
     def loss(self, inputs: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         """For raw `targets` (`[members, n, obs + 1]`: observation change, reward): the Gaussian

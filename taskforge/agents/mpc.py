@@ -9,7 +9,8 @@ Reading order of one training iteration (the trainer drives it like PPO: `collec
    one step. Every transition (observation, action, stage reward, next observation; the true last
    observation of an episode that ended, from `final_obs`) goes into the buffer.
 2. `update`: standardisation statistics refitted on the whole buffer, then `model_updates`
-   Adam steps, each member on its own bootstrap draw of `batch_size` transitions.
+   Adam steps, each member on its own bootstrap draw of `batch_size` transitions; with
+   `terminal_value`, as many TD(0) steps on the value (`value.py`) that scores plans' last states.
 
 Why the agent has the same surface as `PPOAgent` (`collect`, `update`, `act`, `state_dict`):
 the curriculum, checkpoints, `--resume`, the progress bar and `taskforge eval` then work
@@ -31,6 +32,7 @@ from gymnasium.vector import VectorEnv
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan, shift
 from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
+from taskforge.agents.value import TerminalValue
 from taskforge.spec.agent import AgentSpec
 
 OnStep = Callable[[np.ndarray, np.ndarray, np.ndarray, dict], None]
@@ -84,6 +86,10 @@ class MPCAgent:
         self.model = DynamicsEnsemble(obs_size, self.action_size, self.mpc, self.generator)
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=self.mpc.learning_rate, weight_decay=self.mpc.weight_decay)
         self.buffer = TransitionBuffer(self.mpc.buffer_size, obs_size, self.action_size)
+        self.value: TerminalValue | None = None
+        if self.mpc.terminal_value:
+            self.value = TerminalValue(obs_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau, self.generator)
+            self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
         self.low = torch.as_tensor(action_space.low, dtype=torch.float32)
         self.high = torch.as_tensor(action_space.high, dtype=torch.float32)
         self.global_step = 0
@@ -114,7 +120,8 @@ class MPCAgent:
     def _scorer(self, obs: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
         """Predicted return of candidate sequences `[envs, n, horizon, action]` from `obs`
         `[envs, obs]`: `particles` rollouts each, particle p through member p mod members for the
-        whole horizon (TS-inf), rewards discounted and summed, particles averaged."""
+        whole horizon (TS-inf), rewards discounted and summed, plus the discounted terminal
+        value of each particle's last state (`terminal_value`), particles averaged."""
         members, per_member = self.mpc.ensemble_size, self.mpc.particles // self.mpc.ensemble_size
 
         def score(candidates: torch.Tensor) -> torch.Tensor:
@@ -127,6 +134,8 @@ class MPCAgent:
             for t in range(horizon):
                 state, reward = self.model.sample(state, actions[None, :, t].expand(members, -1, -1), self.generator)
                 total += self.mpc.discount**t * reward
+            if self.value is not None:
+                total += self.mpc.discount**horizon * self.value(state)
             return total.reshape(members, envs, n, per_member).mean(dim=(0, 3))
 
         return score
@@ -198,8 +207,14 @@ class MPCAgent:
                                                      x[None, :, obs_size:].expand(mpc.ensemble_size, -1, -1))
             obs_error = ((next_obs - x[None, :, :obs_size]) - y[None, :, :obs_size]) ** 2
             reward_error = (reward - y[None, :, obs_size]) ** 2
-        return {"model_nll": total / mpc.model_updates, "model_obs_mse": obs_error.mean().item(),
-                "model_reward_mse": reward_error.mean().item(), "buffer_size": float(self.buffer.size)}
+        metrics = {"model_nll": total / mpc.model_updates, "model_obs_mse": obs_error.mean().item(),
+                   "model_reward_mse": reward_error.mean().item(), "buffer_size": float(self.buffer.size)}
+        if self.value is not None:
+            n, obs_size = self.buffer.size, self.observation_space.shape[0]
+            metrics |= self.value.fit(self.buffer.obs[:n], self.buffer.rewards[:n], self.buffer.next_obs[:n],
+                                      model.in_mean[:obs_size], model.in_std[:obs_size], self.value_optimizer,
+                                      mpc.model_updates, batch, self.generator)
+        return metrics
 
     def add_demonstrations(self, observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
                            episode_starts: np.ndarray) -> int:
@@ -218,13 +233,19 @@ class MPCAgent:
     def state_dict(self) -> dict:
         """Model, optimizer, data, RNG and counters: tensors and plain values only (loads with
         `torch.load(weights_only=True)`). The buffer is saved whole: a resumed run refits on it."""
-        return {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
-                "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
-                "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets}
+        state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
+                 "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
+                 "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets}
+        if self.value is not None:
+            state |= {"value": self.value.state_dict(), "value_optimizer": self.value_optimizer.state_dict()}
+        return state
 
     def load_state_dict(self, state: dict) -> None:
         self.model.load_state_dict(state["model"])
         self.optimizer.load_state_dict(state["optimizer"])
+        if self.value is not None:
+            self.value.load_state_dict(state["value"])
+            self.value_optimizer.load_state_dict(state["value_optimizer"])
         self.buffer.load_state_dict(state["buffer"])
         self.generator.set_state(state["generator"])
         self.seed, self.global_step, self.num_updates = state["seed"], state["global_step"], state["num_updates"]

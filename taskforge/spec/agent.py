@@ -141,9 +141,17 @@ class MPCSpec(StrictModel):
     temperature: float = Field(default=1.0, gt=0.0)
     """MPPI: lambda, in units of the candidates' return std (so it does not depend on the reward's scale)."""
     discount: float = Field(default=1.0, gt=0.0, le=1.0)
+    terminal_value: bool = False
+    """Add `discount^horizon * V(last state)` to each particle's predicted return, V fitted by
+    TD(0) on the buffer (agents/value.py: LOOP's and TD-MPC's fix for a planner that sees too few
+    steps). Needs `discount` < 1."""
+    value_tau: float = Field(default=0.005, gt=0.0, le=1.0)
+    """Polyak rate of V's target network, per gradient step."""
 
     @model_validator(mode="after")
     def _consistent(self) -> MPCSpec:
+        if self.terminal_value and self.discount >= 1.0:
+            raise ValueError("'terminal_value' needs 'discount' < 1 (e.g. 0.99): a value sums the rewards it discounts")
         if self.elites > self.population:
             raise ValueError(f"'elites' ({self.elites}) must be <= 'population' ({self.population})")
         if self.particles % self.ensemble_size:
