@@ -38,11 +38,11 @@ def object_motion_errors(agent, obj: slice, sample: int = 5000) -> list[dict]:
     n = buffer.size
     obs, actions, next_obs = buffer.obs[:n], buffer.actions[:n], buffer.next_obs[:n]
     moved = (next_obs[:, obj] - obs[:, obj]).norm(dim=1) * 1000
+    members = agent.mpc.ensemble_size
     rows = []
     for lo, hi in BINS_MM:
         idx = torch.nonzero((moved >= lo) & (moved < hi))[:, 0]
         pick = idx[:sample]
-        members = agent.mpc.ensemble_size
         with torch.no_grad():
             predicted, _ = agent.model.mean_prediction(obs[pick][None].expand(members, -1, -1), actions[pick][None].expand(members, -1, -1))
         error = (predicted.mean(0)[:, obj] - next_obs[pick, obj]).norm(dim=1) * 1000
@@ -59,9 +59,9 @@ def main() -> None:
     args = parser.parse_args()
     run = load_run(args.run)
     agent = run.agent
-    start, stop = (int(x) for x in args.object.split(":"))
+    first, stop = (int(x) for x in args.object.split(":"))
     agent.load_state_dict(load_checkpoint(args.run / "checkpoint.pt")["agent"])  # the buffer: the final policy file has none
-    motion = object_motion_errors(agent, slice(start, stop))
+    motion = object_motion_errors(agent, slice(first, stop))
     print_table(["object moved (mm)", "transitions", "model error (mm)", "'no motion' error (mm)"],
                 [[f"{r['moved_mm'][0]}-{r['moved_mm'][1]}", r["transitions"], r["model_error_mm"], r["no_motion_error_mm"]] for r in motion])
     task, task_file, stages = run.phases[-1]

@@ -84,8 +84,9 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self.backend: Backend = make_backend(task, file)
         self.stages = {s.name: CompiledStage(s, file, f"stages[{i}]") for i, s in enumerate(task.stages)}
         self.stage = self._check_stage(stage or task.stages[0].name)
+        self._observed = self._check_observed(task.observation.features)
         if native is None:
-            native = any(s.reads & NATIVE_FEATURES for s in self.stages.values()) or bool(NATIVE_FEATURES & set(task.observation.features or ()))
+            native = any(s.reads & NATIVE_FEATURES for s in self.stages.values()) or not NATIVE_FEATURES.isdisjoint(self._observed)
         self.backend.native = native
         self.task_name = self._check_task_name(task_name)
         # One per sub-task with a MuJoCo model (other backends' checks reject physics terms),
@@ -102,7 +103,6 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         if self._relative and not RELATIVE_FEATURES <= self.backend.provides:
             missing = ", ".join(sorted(RELATIVE_FEATURES - self.backend.provides))
             raise SpecError.single(file, "observation.relative_positions", f"the {task.backend.type} backend does not provide {missing}")
-        self._observed = self._check_observed(task.observation.features)
         base_size = sum(FEATURES[f].size for f in self._observed) if self._observed else self.backend.obs_size
         obs_size = base_size + (RELATIVE_SIZE if self._relative else 0)
         self._obs_noise = AdditiveNoise(rand.observation_noise, obs_size)
