@@ -3,11 +3,16 @@
 1. The model: its one-step error on the object's motion, on the run's own buffer (its local
    `checkpoint.pt`), binned by how far the object really moved, next to predicting no motion.
    A model that has not learnt contact is no better than "no motion" where the object moved.
-2. The planner: held-out success of the final model with the planner it trained with, and with
+2. The fit (`--refit UPDATES`): is it the data or the fit? Fresh models of the run's size fitted
+   offline on 90 % of that buffer for UPDATES Adam steps, once with uniform batches (as the agent
+   draws them) and once with `--oversample` of each batch drawn from transitions where the object
+   moved >= 2 mm, scored per bin on the other 10 % next to the run's own model.
+3. The planner: held-out success of the final model with the planner it trained with, and with
    a bigger one (200 candidates x 4 rounds x 15 steps, 20 elites: ~10x agents/mpc.yaml's search)
-   on the same goals and seeds.
+   on the same goals and seeds (`--trials 0` skips it).
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
+                                   [--refit 40000] [--oversample 0.5]
 
 `--object`: where the object's position sits in the observation (Meta-World: 4:7).
 """
@@ -24,6 +29,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
+from taskforge.agents.dynamics import DynamicsEnsemble  # noqa: E402
 from taskforge.rollouts import evaluate_rows  # noqa: E402
 from taskforge.run import load_checkpoint, load_run  # noqa: E402
 
@@ -31,24 +37,53 @@ BIGGER = {"population": 200, "iterations": 4, "horizon": 15, "elites": 20}
 BINS_MM = ((0, 2), (2, 5), (5, 10), (10, 1000))
 
 
-def object_motion_errors(agent, obj: slice, sample: int = 5000) -> list[dict]:
-    """Per bin of true object motion (mm): transitions in the buffer, the model's mean error and
-    the error of predicting no motion, on up to `sample` transitions of the bin."""
-    buffer = agent.buffer
-    n = buffer.size
-    obs, actions, next_obs = buffer.obs[:n], buffer.actions[:n], buffer.next_obs[:n]
-    moved = (next_obs[:, obj] - obs[:, obj]).norm(dim=1) * 1000
-    members = agent.mpc.ensemble_size
-    rows = []
+def moved_mm(agent, obj: slice) -> torch.Tensor:
+    """How far the object truly moved (mm) in each transition of the agent's buffer."""
+    n = agent.buffer.size
+    return (agent.buffer.next_obs[:n, obj] - agent.buffer.obs[:n, obj]).norm(dim=1) * 1000
+
+
+def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch.Tensor, sample: int = 5000) -> list[dict]:
+    """Per bin of true object motion (mm), among the buffer's transitions `rows`: how many, the
+    `model`'s mean error and the error of predicting no motion, on up to `sample` of the bin."""
+    buffer, moved = agent.buffer, moved_mm(agent, obj)
+    result = []
     for lo, hi in BINS_MM:
-        idx = torch.nonzero((moved >= lo) & (moved < hi))[:, 0]
+        idx = rows[(moved[rows] >= lo) & (moved[rows] < hi)]
         pick = idx[:sample]
+        members = model.members
         with torch.no_grad():
-            predicted, _ = agent.model.mean_prediction(obs[pick][None].expand(members, -1, -1), actions[pick][None].expand(members, -1, -1))
-        error = (predicted.mean(0)[:, obj] - next_obs[pick, obj]).norm(dim=1) * 1000
-        rows.append({"moved_mm": [lo, hi], "transitions": len(idx), "model_error_mm": error.mean().item() if len(pick) else None,
-                     "no_motion_error_mm": moved[pick].mean().item() if len(pick) else None})
-    return rows
+            predicted, _ = model.mean_prediction(buffer.obs[pick][None].expand(members, -1, -1), buffer.actions[pick][None].expand(members, -1, -1))
+        error = (predicted.mean(0)[:, obj] - buffer.next_obs[pick, obj]).norm(dim=1) * 1000
+        result.append({"moved_mm": [lo, hi], "transitions": len(idx), "model_error_mm": error.mean().item() if len(pick) else None,
+                       "no_motion_error_mm": moved[pick].mean().item() if len(pick) else None})
+    return result
+
+
+def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversample: float, seed: int) -> DynamicsEnsemble:
+    """A fresh model of the agent's size, fitted as `MPCAgent._fit` fits (standardised on the
+    data, Adam, bootstrap batches per member) on the buffer rows `train` for `updates` steps;
+    `oversample` of each batch drawn from the rows where the object moved >= 2 mm."""
+    spec, generator = agent.mpc, torch.Generator().manual_seed(seed)
+    inputs, targets = agent.buffer.inputs_and_targets()
+    model = DynamicsEnsemble(agent.buffer.obs.shape[1], agent.buffer.actions.shape[1], spec, generator)
+    optimizer = torch.optim.Adam(model.parameters(), lr=spec.learning_rate, weight_decay=spec.weight_decay)
+    model.fit_normalization(inputs[train], targets[train])
+    movers = train[moved[train] >= 2.0]
+    rare = round(spec.batch_size * oversample) if len(movers) else 0
+    for _ in range(updates):
+        idx = torch.cat([train[torch.randint(len(train), (spec.ensemble_size, spec.batch_size - rare), generator=generator)],
+                         movers[torch.randint(max(len(movers), 1), (spec.ensemble_size, rare), generator=generator)]], dim=1)
+        loss = model.loss(inputs[idx], targets[idx])
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    return model
+
+
+def motion_table(rows: list[dict]) -> None:
+    print_table(["object moved (mm)", "transitions", "model error (mm)", "'no motion' error (mm)"],
+                [[f"{r['moved_mm'][0]}-{r['moved_mm'][1]}", r["transitions"], r["model_error_mm"], r["no_motion_error_mm"]] for r in rows])
 
 
 def main() -> None:
@@ -56,26 +91,49 @@ def main() -> None:
     parser.add_argument("run", type=Path)
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--object", default="4:7", help="the object's position in the observation, start:stop")
+    parser.add_argument("--refit", type=int, default=0, help="Adam steps of the offline refits (0: skip them)")
+    parser.add_argument("--oversample", type=float, default=0.5, help="share of each refit batch from transitions that moved the object")
     args = parser.parse_args()
     run = load_run(args.run)
     agent = run.agent
-    first, stop = (int(x) for x in args.object.split(":"))
+    obj = slice(*(int(x) for x in args.object.split(":")))
     agent.load_state_dict(load_checkpoint(args.run / "checkpoint.pt")["agent"])  # the buffer: the final policy file has none
-    motion = object_motion_errors(agent, slice(first, stop))
-    print_table(["object moved (mm)", "transitions", "model error (mm)", "'no motion' error (mm)"],
-                [[f"{r['moved_mm'][0]}-{r['moved_mm'][1]}", r["transitions"], r["model_error_mm"], r["no_motion_error_mm"]] for r in motion])
+    everything = torch.arange(agent.buffer.size)
+    motion = object_motion_errors(agent, agent.model, obj, everything)
+    motion_table(motion)
+    payload: dict = {"run": str(args.run), "step": agent.global_step, "object_motion": motion}
+    if args.refit:
+        split = torch.randperm(agent.buffer.size, generator=torch.Generator().manual_seed(0))
+        held_out, train = split[: len(split) // 10], split[len(split) // 10 :]
+        moved = moved_mm(agent, obj)
+        fits = {"run's model": agent.model}
+        for label, share in (("refit, uniform", 0.0), (f"refit, {args.oversample:.0%} movers", args.oversample)):
+            start = time.perf_counter()
+            fits[label] = refit(agent, train, moved, args.refit, share, seed=0)
+            print(f"{label}: {args.refit} steps in {time.perf_counter() - start:.0f} s")
+        payload["refit"] = {"updates": args.refit, "oversample": args.oversample, "held_out": len(held_out),
+                            "errors": {label: object_motion_errors(agent, model, obj, held_out) for label, model in fits.items()}}
+        for label, rows in payload["refit"]["errors"].items():
+            print(f"\n{label}, held-out 10 %:")
+            motion_table(rows)
+    if args.trials:
+        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials)}
+    print(f"wrote {write_result(f'mpc_probe_{args.run.name}', payload)}")
+
+
+def compare_planners(agent, run, trials: int) -> list[dict]:
+    """Held-out success of the final model with its own planner and with `BIGGER`."""
     task, task_file, stages = run.phases[-1]
     rows = []
     for label, change in (("as trained", {}), ("bigger search", BIGGER)):
         agent.mpc = agent.spec.planning.model_copy(update=change)
         start = time.perf_counter()
-        (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", args.trials, 1, seed=0, stop_on_success=True)
+        (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
         rows.append({"planner": label, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites"}),
                      "success_rate": result.as_dict()["success_rate"], "seconds": time.perf_counter() - start})
     print_table(["planner", "population x rounds x horizon", "held-out success", "s"],
                 [[r["planner"], f"{r['population']} x {r['iterations']} x {r['horizon']}", f"{r['success_rate']:.2f}", r["seconds"]] for r in rows])
-    payload = {"run": str(args.run), "step": agent.global_step, "stage": stages[-1], "trials": args.trials, "object_motion": motion, "planners": rows}
-    print(f"wrote {write_result(f'mpc_probe_{args.run.name}', payload)}")
+    return rows
 
 
 if __name__ == "__main__":

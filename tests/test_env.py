@@ -94,6 +94,28 @@ def test_reach_stage_success_flips_when_the_gripper_reaches_the_object(pick_plac
     assert env.features()["tcp_to_object_distance"] < 0.03
 
 
+def test_tcp_to_object_progress_pays_the_approach_once_with_the_goal_hidden(pick_place_doc):
+    """The object's progress term does not depend on the goal, so a task that hides its goal may
+    be paid it; over an approach and a retreat it pays start distance - closest distance."""
+    doc = copy.deepcopy(pick_place_doc)
+    doc.pop("randomization")
+    doc["goals"]["observable"] = False
+    doc["observation"] = {"features": ["tcp_pos", "object_pos"]}
+    doc["stages"][0]["rewards"] = [{"term": "tcp_to_object_progress", "weight": 1.0}]
+    env = env_from(doc, stage="reach", seed=0)
+    env.reset()
+    start = closest = env.features()["tcp_to_object_distance"]
+    paid = []
+    for k in range(60):
+        f = env.features()
+        toward = np.clip((f["object_pos"] - f["tcp_pos"]) * 20.0, -1, 1)
+        _, reward, *_ = env.step(np.append(toward if k < 40 else -toward, -1.0))
+        paid.append(reward)
+        closest = min(closest, env.features()["tcp_to_object_distance"])
+    assert all(r == 0.0 for r in paid[45:])  # moving away never pays
+    assert sum(paid) == pytest.approx(start - closest, abs=1e-6)
+
+
 def test_push_stage_moves_goal_to_the_table_and_closer(pick_place_doc):
     env = taskforge.make(PICK_PLACE, stage="push", seed=2)
     env.reset(options={"goal_index": 4})

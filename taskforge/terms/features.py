@@ -41,18 +41,21 @@ FEATURES: dict[str, FeatureInfo] = {
     "stage_success": FeatureInfo(1, "1 when the current stage's success condition holds"),
     "tcp_to_goal_progress": FeatureInfo(1, "how much closer (m) the tool came to the goal this step than ever before in the episode; 0 when it did not"),
     "object_to_goal_progress": FeatureInfo(1, "how much closer (m) the object came to the goal this step than ever before in the episode; 0 when it did not"),
+    "tcp_to_object_progress": FeatureInfo(1, "how much closer (m) the tool came to the object this step than ever before in the episode; 0 when it did not"),
 }
 
 PROGRESS_FEATURES: dict[str, str] = {
     "tcp_to_goal_progress": "tcp_to_goal_distance",
     "object_to_goal_progress": "object_to_goal_distance",
+    "tcp_to_object_progress": "tcp_to_object_distance",
 }
 """Record-distance features and the distance each follows. The env fills them (it alone sees
 the episode's history) on any backend that provides the distance. Why: a term of the current
 distance pays for *being* near the goal, so with the goal hidden, hovering mid-box out-earns a
 search; a term of the record pays only for coming nearer than before, so over an episode it
 sums to start distance - closest distance, which a sweep that passes the goal maximises."""
-GOAL_FEATURES = frozenset({"goal_pos", "object_to_goal_distance", "tcp_to_goal_distance", "native_success", *PROGRESS_FEATURES})
+GOAL_FEATURES = frozenset({"goal_pos", "object_to_goal_distance", "tcp_to_goal_distance", "native_success",
+                           *(p for p, d in PROGRESS_FEATURES.items() if d in {"object_to_goal_distance", "tcp_to_goal_distance"})})
 """Features that depend on where the goal is (Meta-World's own success flag measures to its goal):
 a success condition on one of them cannot be met on a held-out goal the policy neither sees nor
 can infer."""
