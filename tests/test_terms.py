@@ -54,7 +54,6 @@ def test_indicator_and_passthrough_terms():
     assert term_value("tcp_to_goal_progress", features(tcp_to_goal_progress=0.01)) == 0.01
     assert term_value("object_to_goal_progress", features(object_to_goal_progress=0.02)) == 0.02
     assert term_value("tcp_to_object_progress", features(tcp_to_object_progress=0.03)) == 0.03
-    assert term_value("per_step", features()) == 1.0
     assert term_value("action_l2", features(action=np.array([1.0, -2.0, 0.0, 2.0]))) == pytest.approx(9.0)
 
 

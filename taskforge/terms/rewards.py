@@ -124,10 +124,3 @@ def stage_success(f: Features, p: NoParams) -> float:
     """1 on steps where the stage's success condition holds (a sparse bonus)."""
     return f["stage_success"]
 
-
-@reward_term("per_step", ())
-def per_step(f: Features, p: NoParams) -> float:
-    """1 on every step. With a negative weight it is a cost of time: on a stage that ends at its
-    success (`terminate_on_success`) it pays for finishing sooner, which a distance or progress
-    term does not (a progress term sums to the same whatever the path's length)."""
-    return 1.0
