@@ -6,13 +6,15 @@
 2. The fit (`--refit UPDATES`): is it the data or the fit? Fresh models of the run's size fitted
    offline on 90 % of that buffer for UPDATES Adam steps, once with uniform batches (as the agent
    draws them) and once with `--oversample` of each batch drawn from transitions where the object
-   moved >= 2 mm, scored per bin on the other 10 % next to the run's own model.
+   moved >= `--moved-mm` (default 5: Meta-World push's observation noise, std 1 mm per number,
+   alone makes a still puck "move" 2-3 mm between two observations), scored per bin on the other 10 % next to the run's own model; `--hidden` sizes
+   the refits' layers (is it the model's capacity?).
 3. The planner: held-out success of the final model with the planner it trained with, and with
    a bigger one (200 candidates x 4 rounds x 15 steps, 20 elites: ~10x agents/mpc.yaml's search)
    on the same goals and seeds (`--trials 0` skips it).
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
-                                   [--refit 40000] [--oversample 0.5]
+                                   [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
 
 `--object`: where the object's position sits in the observation (Meta-World: 4:7).
 """
@@ -60,16 +62,17 @@ def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch
     return result
 
 
-def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversample: float, seed: int) -> DynamicsEnsemble:
-    """A fresh model of the agent's size, fitted as `MPCAgent._fit` fits (standardised on the
+def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversample: float, seed: int,
+          hidden: list[int] | None = None, threshold_mm: float = 5.0) -> DynamicsEnsemble:
+    """A fresh model of the agent's size (or of `hidden` layers), fitted as `MPCAgent._fit` fits (standardised on the
     data, Adam, bootstrap batches per member) on the buffer rows `train` for `updates` steps;
-    `oversample` of each batch drawn from the rows where the object moved >= 2 mm."""
-    spec, generator = agent.mpc, torch.Generator().manual_seed(seed)
+    `oversample` of each batch drawn from the rows where the object moved >= `threshold_mm`."""
+    spec, generator = agent.mpc.model_copy(update={"hidden_sizes": hidden or agent.mpc.hidden_sizes}), torch.Generator().manual_seed(seed)
     inputs, targets = agent.buffer.inputs_and_targets()
     model = DynamicsEnsemble(agent.buffer.obs.shape[1], agent.buffer.actions.shape[1], spec, generator)
     optimizer = torch.optim.Adam(model.parameters(), lr=spec.learning_rate, weight_decay=spec.weight_decay)
     model.fit_normalization(inputs[train], targets[train])
-    movers = train[moved[train] >= 2.0]
+    movers = train[moved[train] >= threshold_mm]
     rare = round(spec.batch_size * oversample) if len(movers) else 0
     for _ in range(updates):
         idx = torch.cat([train[torch.randint(len(train), (spec.ensemble_size, spec.batch_size - rare), generator=generator)],
@@ -93,6 +96,8 @@ def main() -> None:
     parser.add_argument("--object", default="4:7", help="the object's position in the observation, start:stop")
     parser.add_argument("--refit", type=int, default=0, help="Adam steps of the offline refits (0: skip them)")
     parser.add_argument("--oversample", type=float, default=0.5, help="share of each refit batch from transitions that moved the object")
+    parser.add_argument("--moved-mm", type=float, default=5.0, help="what counts as the object moving, for --oversample")
+    parser.add_argument("--hidden", type=int, nargs="+", help="the refits' hidden layer sizes (default: the run's)")
     args = parser.parse_args()
     run = load_run(args.run)
     agent = run.agent
@@ -107,18 +112,20 @@ def main() -> None:
         held_out, train = split[: len(split) // 10], split[len(split) // 10 :]
         moved = moved_mm(agent, obj)
         fits = {"run's model": agent.model}
-        for label, share in (("refit, uniform", 0.0), (f"refit, {args.oversample:.0%} movers", args.oversample)):
+        for label, share in (("refit, uniform", 0.0), (f"refit, {args.oversample:.0%} moves >= {args.moved_mm:g} mm", args.oversample)):
             start = time.perf_counter()
-            fits[label] = refit(agent, train, moved, args.refit, share, seed=0)
+            fits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm)
             print(f"{label}: {args.refit} steps in {time.perf_counter() - start:.0f} s")
-        payload["refit"] = {"updates": args.refit, "oversample": args.oversample, "held_out": len(held_out),
+        payload["refit"] = {"updates": args.refit, "oversample": args.oversample, "moved_mm": args.moved_mm, "hidden": args.hidden or agent.mpc.hidden_sizes,
+                            "held_out": len(held_out),
                             "errors": {label: object_motion_errors(agent, model, obj, held_out) for label, model in fits.items()}}
         for label, rows in payload["refit"]["errors"].items():
             print(f"\n{label}, held-out 10 %:")
             motion_table(rows)
     if args.trials:
         payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials)}
-    print(f"wrote {write_result(f'mpc_probe_{args.run.name}', payload)}")
+    name = f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")
+    print(f"wrote {write_result(name, payload)}")
 
 
 def compare_planners(agent, run, trials: int) -> list[dict]:
