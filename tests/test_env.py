@@ -94,6 +94,27 @@ def test_reach_stage_success_flips_when_the_gripper_reaches_the_object(pick_plac
     assert env.features()["tcp_to_object_distance"] < 0.03
 
 
+def test_hold_steps_counts_success_only_after_the_condition_held_that_long(pick_place_doc):
+    doc = copy.deepcopy(pick_place_doc)
+    doc.pop("randomization")
+    doc["stages"][0]["success"]["hold_steps"] = 5
+    doc["stages"][0]["terminate_on_success"] = True
+    doc["stages"][0]["rewards"].append({"term": "stage_success", "weight": 1.0})
+    env = env_from(doc, stage="reach", seed=0)
+    env.reset()
+    held, history = 0, []
+    for _ in range(120):
+        f = env.features()
+        _, _, terminated, _, info = env.step(np.append(np.clip((f["object_pos"] - f["tcp_pos"]) * 20.0, -1, 1), -1.0))
+        held = held + 1 if env.features()["tcp_to_object_distance"] < 0.03 else 0  # the condition, by hand
+        history.append((held, info["success"], info["reward_terms"]["stage_success"], terminated))
+        if terminated:
+            break
+    assert history[-1] == (5, True, 1.0, True)  # ends on the 5th step in a row, paid there
+    assert all(not success and not paid and not end for h, success, paid, end in history[:-1])
+    assert any(0 < h < 5 for h, *_ in history)  # the condition held earlier without counting
+
+
 def test_tcp_to_object_progress_pays_the_approach_once_with_the_goal_hidden(pick_place_doc):
     """The object's progress term does not depend on the goal, so a task that hides its goal may
     be paid it; over an approach and a retreat it pays start distance - closest distance."""

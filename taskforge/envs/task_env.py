@@ -120,6 +120,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._episode: dict[str, Any] = {}
         self._t = 0
         self._ever_success = False
+        self._held = 0
+        """Steps in a row the stage's conditions have held (`success.hold_steps`)."""
         read = frozenset().union(*(s.reads for s in self.stages.values()))
         self._progress = {p: d for p, d in PROGRESS_FEATURES.items() if p in read and d in self.backend.provides}
         """Progress features some stage reads, each with its distance: only they cost a step."""
@@ -202,13 +204,14 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         # which finished episodes were replays without tracking autoresets itself.
         self._episode = {"stage": self.stage, "task": name, "goal_index": goal_index, "replay": bool(options.get("replay", False))}
         self._ever_success = False
+        self._held = 0
         self._reward_sums = dict.fromkeys((t.key for t in self.stages[self.stage].terms), 0.0)
         self._physics_draw = physics_draw
         features = self.backend.features()
         features["action"] = np.zeros(self.action_space.shape[0])
         self._closest = {p: features[d] for p, d in self._progress.items()}
         features.update(dict.fromkeys(self._progress, 0.0))
-        info = self._info(features, stage.success(features), {})
+        info = self._info(features, stage.success(features) and stage.spec.success.hold_steps == 1, {})
         return self._observe(obs, features), info
 
     def step(self, action: np.ndarray):
@@ -228,7 +231,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             features[feature] = max(0.0, record - now)
             self._closest[feature] = min(record, now)
         stage = self.stages[self.stage]
-        success = stage.success(features)
+        self._held = self._held + 1 if stage.success(features) else 0
+        success = self._held >= stage.spec.success.hold_steps
         features["stage_success"] = float(success)
         reward, terms = stage.reward(features)
         if not (finite_action and math.isfinite(reward) and math.isfinite(obs.sum()) and not self._diverged()):

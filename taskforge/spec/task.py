@@ -46,9 +46,14 @@ class ConditionSpec(StrictModel):
 
 
 class SuccessSpec(StrictModel):
-    """The stage succeeds when every condition in `all` holds."""
+    """The stage succeeds when every condition in `all` holds (on `hold_steps` steps in a row)."""
 
     all: list[ConditionSpec] = Field(min_length=1)
+    hold_steps: int = Field(default=1, ge=1, le=10_000)
+    """Steps in a row the conditions must hold before the stage counts as succeeded. Why: with 1
+    (Meta-World's convention), an object that only passes through the goal region succeeds, so a
+    blind sweep scores well on a hidden goal and the first episode of an RL² trial is already
+    near the ceiling; requiring the object to stay tells a search from knowing where the goal is."""
 
 
 class GoalOverrideSpec(StrictModel):
