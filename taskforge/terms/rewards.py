@@ -123,4 +123,3 @@ def native(f: Features, p: NoParams) -> float:
 def stage_success(f: Features, p: NoParams) -> float:
     """1 on steps where the stage's success condition holds (a sparse bonus)."""
     return f["stage_success"]
-
