@@ -48,12 +48,11 @@ def moved_mm(agent, obj: slice) -> torch.Tensor:
 def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch.Tensor, sample: int = 5000) -> list[dict]:
     """Per bin of true object motion (mm), among the buffer's transitions `rows`: how many, the
     `model`'s mean error and the error of predicting no motion, on up to `sample` of the bin."""
-    buffer, moved = agent.buffer, moved_mm(agent, obj)
+    buffer, moved, members = agent.buffer, moved_mm(agent, obj), model.members
     result = []
     for lo, hi in BINS_MM:
         idx = rows[(moved[rows] >= lo) & (moved[rows] < hi)]
         pick = idx[:sample]
-        members = model.members
         with torch.no_grad():
             predicted, _ = model.mean_prediction(buffer.obs[pick][None].expand(members, -1, -1), buffer.actions[pick][None].expand(members, -1, -1))
         error = (predicted.mean(0)[:, obj] - buffer.next_obs[pick, obj]).norm(dim=1) * 1000

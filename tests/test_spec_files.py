@@ -16,6 +16,8 @@ SHIPPED = sorted(
 
 MEMORYLESS_BASELINES = {
     "benchmarks/configs/ml1_push_ppo.yaml",
+    "benchmarks/configs/ml1_push_ppo_hand.yaml",
+    "benchmarks/configs/ml1_push_ppo_hold.yaml",
     "benchmarks/configs/ml1_reach_ppo.yaml",
     "benchmarks/configs/point_semicircle_ppo.yaml",
 }
