@@ -76,10 +76,7 @@ def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversam
     for _ in range(updates):
         idx = torch.cat([train[torch.randint(len(train), (spec.ensemble_size, spec.batch_size - rare), generator=generator)],
                          movers[torch.randint(max(len(movers), 1), (spec.ensemble_size, rare), generator=generator)]], dim=1)
-        loss = model.loss(inputs[idx], targets[idx])
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
+        model.fit_batch(optimizer, inputs[idx], targets[idx])
     return model
 
 

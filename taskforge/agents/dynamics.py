@@ -111,6 +111,14 @@ class DynamicsEnsemble(nn.Module):
         nll = (((mean - target[..., :-1]) ** 2) * torch.exp(-logvar) + logvar).sum(dim=-1).mean()
         return nll + ((reward - target[..., -1]) ** 2).mean() + 0.01 * (self.max_logvar.sum() - self.min_logvar.sum())
 
+    def fit_batch(self, optimizer: torch.optim.Optimizer, inputs: torch.Tensor, targets: torch.Tensor) -> float:
+        """One Adam step on `loss` for `[members, batch, ...]` raw inputs and targets; the loss."""
+        loss = self.loss(inputs, targets)
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return loss.item()
+
     def _predict(self, obs: torch.Tensor, actions: torch.Tensor, generator: torch.Generator | None) -> tuple[torch.Tensor, torch.Tensor]:
         mean, logvar, reward = self((torch.cat([obs, actions], dim=-1) - self.in_mean) / self.in_std)
         change = mean if generator is None else mean + torch.exp(0.5 * logvar) * torch.randn(mean.shape, generator=generator)

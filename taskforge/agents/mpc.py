@@ -193,11 +193,7 @@ class MPCAgent:
         for _ in range(mpc.model_updates):
             # bootstrap: each member draws its own batch with replacement
             idx = torch.randint(self.buffer.size, (mpc.ensemble_size, batch), generator=self.generator)
-            loss = model.loss(inputs[idx], targets[idx])
-            self.optimizer.zero_grad()
-            loss.backward()
-            self.optimizer.step()
-            total += loss.item()
+            total += model.fit_batch(self.optimizer, inputs[idx], targets[idx])
         self.num_updates += 1
         with torch.no_grad():  # the fit's error on a sample of the data, in the data's units
             sample = torch.randint(self.buffer.size, (min(2048, self.buffer.size),), generator=self.generator)

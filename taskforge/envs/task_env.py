@@ -211,7 +211,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         features["action"] = np.zeros(self.action_space.shape[0])
         self._closest = {p: features[d] for p, d in self._progress.items()}
         features.update(dict.fromkeys(self._progress, 0.0))
-        info = self._info(features, stage.success(features) and stage.spec.success.hold_steps == 1, {})
+        info = self._info(features, stage.success(features) and stage.hold_steps == 1, {})
         return self._observe(obs, features), info
 
     def step(self, action: np.ndarray):
@@ -232,7 +232,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
             self._closest[feature] = min(record, now)
         stage = self.stages[self.stage]
         self._held = self._held + 1 if stage.success(features) else 0
-        success = self._held >= stage.spec.success.hold_steps
+        success = self._held >= stage.hold_steps
         features["stage_success"] = float(success)
         reward, terms = stage.reward(features)
         if not (finite_action and math.isfinite(reward) and math.isfinite(obs.sum()) and not self._diverged()):

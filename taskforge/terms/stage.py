@@ -46,6 +46,8 @@ class CompiledStage:
              float("-inf") if c.above is None else c.above)
             for c in spec.success.all
         ]
+        self.hold_steps = spec.success.hold_steps
+        """Steps in a row `success` must hold before the stage succeeds (the env counts them)."""
 
     def success(self, features: Features) -> bool:
         for name, below, above in self._conditions:
