@@ -4,6 +4,7 @@ of RL² next to a memoryless PPO baseline.
 
     python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
                                  rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
+                                 rl2-reach-zone rl2-reach-zone-find ppo-reach-zone-find
                                  rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold
                                  ppo-reach rl2-push ppo-push rl2-pick-place]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
@@ -39,6 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
 from taskforge.run import RunDir, read_jsonl  # noqa: E402
+from taskforge.spec.loader import load_curriculum_spec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {
@@ -57,6 +59,9 @@ VARIANTS = {
     "rl2-reach-found-calm": ROOT / "benchmarks/configs/ml1_reach_rl2_found_calm.yaml",
     "rl2-reach-found-hand": ROOT / "benchmarks/configs/ml1_reach_rl2_found_hand.yaml",
     "rl2-reach-box-hand": ROOT / "benchmarks/configs/ml1_reach_rl2_box_hand.yaml",
+    "rl2-reach-zone": ROOT / "benchmarks/configs/ml1_reach_rl2_zone.yaml",
+    "rl2-reach-zone-find": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find.yaml",
+    "ppo-reach-zone-find": ROOT / "benchmarks/configs/ml1_reach_ppo_zone_find.yaml",
     "ppo-reach": ROOT / "benchmarks/configs/ml1_reach_ppo.yaml",
     "rl2-push": ROOT / "benchmarks/configs/ml1_push_rl2.yaml",
     "ppo-push": ROOT / "benchmarks/configs/ml1_push_ppo.yaml",
@@ -72,21 +77,23 @@ TRIAL_EPISODES = 5  # agents/rl2.yaml's K; the PPO baseline is evaluated over th
 
 def meta_evaluate(
     run_dir: Path, step: int, trials: int, sampled: bool, trial_episodes: int = TRIAL_EPISODES,
-    splits: tuple[str, ...] = ("train", "test"),
+    splits: tuple[str, ...] = ("train", "test"), stage: str | None = None,
 ) -> list[dict]:
     """Meta-train and meta-test evaluation (`splits`) of the run's checkpoint at `step`, cached per step.
 
     `sampled`: act by sampling from the policy instead of taking its mean. An RL² policy's
     exploration in a trial's first episodes is its sampling noise as much as its mean (Duan et
     al. and garage meta-test with sampled actions), so the mean alone may hide adaptation.
-    Cache entries written before this option had no `sampled` key: they are mean-action ones."""
+    Cache entries written before this option had no `sampled` key: they are mean-action ones.
+    `stage`: the stage to evaluate (the curriculum's `evaluation.stage`, e.g. the last of a
+    curriculum of stages); default the run's first, the only one of a one-stage curriculum."""
     cache = run_dir / "meta_evals.jsonl"
     done = [e for e in read_jsonl(cache) if e["step"] == step and e["trials"] == trials and e.get("sampled", False) == sampled]
     for split in splits:
         if any(e["split"] == split for e in done):
             continue
         report = evaluate_run(RunDir(run_dir).checkpoint, split=split, trials=trials, trial_episodes=trial_episodes,
-                              deterministic=not sampled)
+                              deterministic=not sampled, stages=[stage] if stage else None)
         row = report["rows"][0]
         entry = {"step": step, "split": split, "trials": trials, "sampled": sampled, "success_rate": row["success_rate"],
                  "per_episode": [e["success_rate"] for e in row["per_episode"]],
@@ -184,8 +191,9 @@ def main() -> None:
             if not args.report_only:
                 start = time.perf_counter()
                 step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
+                stage = load_curriculum_spec(VARIANTS[variant]).evaluation.stage
                 for sampled in (False, True):  # a finished run gets any evaluation it lacks
-                    meta_evaluate(run_dir, step, args.trials, sampled)
+                    meta_evaluate(run_dir, step, args.trials, sampled, stage=stage)
                 print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
             if not run.metrics.exists():
                 continue
