@@ -182,3 +182,12 @@ def test_mpc_warm_start_seeds_the_models_data_and_refuses_dagger(tmp_path, capsy
     assert metrics[0]["step"] == metrics[0]["expert_steps"] == demos.num_steps
     # the model was fitted on them before the first plan: no random phase, the buffer starts there
     assert metrics[1]["buffer_size"] == demos.num_steps - demos.num_episodes + 400
+
+
+def test_validate_describes_the_mpc_warm_start_as_the_models_data(capsys, monkeypatch):
+    """`taskforge validate` on an MPC curriculum with demos says what they do there (seed the
+    model's data), not the PPO warm start's cloning, DAgger and BC term, which MPC does not run."""
+    monkeypatch.chdir(ROOT)
+    assert main(["validate", "benchmarks/configs/mpc_pick_place_demos.yaml"]) == 0
+    [line] = [x for x in capsys.readouterr().out.splitlines() if "warm start from" in x]
+    assert "seed the dynamics model's data" in line and "BC" not in line
