@@ -113,11 +113,11 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     if ws is not None:
         tasks = " + ".join(f"{p.task.name}:{ws.stage or p.stages[-1]}" for p in cur.warm_start_phases())
         source = str(cur.demos_file) if ws.demos else f"{ws.generate_episodes} scripted episodes of {tasks}"
-        ft = ws.fine_tune
-        std = ft.exploration_std if isinstance(ft.exploration_std, str) else f"{ft.exploration_std:g}"
         if cur.agent.algo == "mpc":  # no policy to clone: the demos are the model's first data
             lines.append(f"  warm start from {source}: they seed the dynamics model's data, fitted on them before the first plan")
         else:
+            ft = ws.fine_tune
+            std = ft.exploration_std if isinstance(ft.exploration_std, str) else f"{ft.exploration_std:g}"
             lines.append(
                 f"  warm start from {source}: BC {ws.bc_epochs} epochs"
                 + (f", {ws.dagger.rounds} DAgger rounds of {ws.dagger.steps_per_round:,} steps" if ws.dagger.rounds else "")
