@@ -41,7 +41,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
 from taskforge.run import RunDir, read_jsonl  # noqa: E402
-from taskforge.spec.loader import load_curriculum_spec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {
@@ -82,7 +81,7 @@ TRIAL_EPISODES = 5  # agents/rl2.yaml's K; the PPO baseline is evaluated over th
 
 def meta_evaluate(
     run_dir: Path, step: int, trials: int, sampled: bool, trial_episodes: int = TRIAL_EPISODES,
-    splits: tuple[str, ...] = ("train", "test"), stage: str | None = None,
+    splits: tuple[str, ...] = ("train", "test"),
 ) -> list[dict]:
     """Meta-train and meta-test evaluation (`splits`) of the run's checkpoint at `step`, cached per step.
 
@@ -90,14 +89,17 @@ def meta_evaluate(
     exploration in a trial's first episodes is its sampling noise as much as its mean (Duan et
     al. and garage meta-test with sampled actions), so the mean alone may hide adaptation.
     Cache entries written before this option had no `sampled` key: they are mean-action ones.
-    `stage`: the stage to evaluate (the curriculum's `evaluation.stage`, e.g. the last of a
-    curriculum of stages); default the run's first, the only one of a one-stage curriculum."""
+    The stage evaluated is the one the run's curriculum evaluates (`evaluation.stage`, read from
+    the run's config.json: e.g. the last of a curriculum of stages), else the run's first, the
+    only one of a one-stage curriculum."""
+    run = RunDir(run_dir)
+    stage = json.loads(run.config.read_text())["curriculum"]["evaluation"]["stage"]
     cache = run_dir / "meta_evals.jsonl"
     done = [e for e in read_jsonl(cache) if e["step"] == step and e["trials"] == trials and e.get("sampled", False) == sampled]
     for split in splits:
         if any(e["split"] == split for e in done):
             continue
-        report = evaluate_run(RunDir(run_dir).checkpoint, split=split, trials=trials, trial_episodes=trial_episodes,
+        report = evaluate_run(run.checkpoint, split=split, trials=trials, trial_episodes=trial_episodes,
                               deterministic=not sampled, stages=[stage] if stage else None)
         row = report["rows"][0]
         entry = {"step": step, "split": split, "trials": trials, "sampled": sampled, "success_rate": row["success_rate"],
@@ -196,9 +198,8 @@ def main() -> None:
             if not args.report_only:
                 start = time.perf_counter()
                 step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
-                stage = load_curriculum_spec(VARIANTS[variant]).evaluation.stage
                 for sampled in (False, True):  # a finished run gets any evaluation it lacks
-                    meta_evaluate(run_dir, step, args.trials, sampled, stage=stage)
+                    meta_evaluate(run_dir, step, args.trials, sampled)
                 print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
             if not run.metrics.exists():
                 continue

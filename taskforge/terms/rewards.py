@@ -121,5 +121,6 @@ def native(f: Features, p: NoParams) -> float:
 
 @reward_term("stage_success", ("stage_success",))
 def stage_success(f: Features, p: NoParams) -> float:
-    """1 on steps where the stage's success condition holds (a sparse bonus)."""
+    """1 on steps where the stage succeeds (its condition holds, on `success.hold_steps` steps in
+    a row): a sparse bonus."""
     return f["stage_success"]
