@@ -47,7 +47,8 @@ def task_summary(task: TaskSpec) -> list[str]:
         if stage.max_episode_steps:
             extras.append(f"{stage.max_episode_steps} steps")
         if stage.goal.height != "keep" or stage.goal.distance_scale != 1.0:
-            extras.append(f"goal height={stage.goal.height}, distance x{stage.goal.distance_scale:g}")
+            spread = f" (height x{stage.goal.height_scale:g})" if stage.goal.height_scale else ""
+            extras.append(f"goal height={stage.goal.height}{spread}, distance x{stage.goal.distance_scale:g}")
         if stage.terminate_on_success:
             extras.append("ends on success")
         tail = f" [{'; '.join(extras)}]" if extras else ""

@@ -150,6 +150,22 @@ def test_push_stage_moves_goal_to_the_table_and_closer(pick_place_doc):
     assert d_push == pytest.approx(0.5 * d_place, rel=1e-6)
 
 
+def test_height_scale_keeps_part_of_the_drawn_height_around_the_stage_height(pick_place_doc):
+    def goal(override: dict | None) -> np.ndarray:
+        doc = copy.deepcopy(pick_place_doc)
+        if override is not None:
+            doc["stages"][-1]["goal"] = override
+        env = env_from(doc, stage="place", seed=3)
+        env.reset(options={"goal_index": 7})
+        return env.features()["goal_pos"].copy()
+
+    drawn, plane, half = goal(None), goal({"height": 0.15}), goal({"height": 0.15, "height_scale": 0.5})
+    assert abs(drawn[2] - 0.15) > 0.01  # the check below would pass trivially on the plane itself
+    assert plane[2] == pytest.approx(0.15, abs=1e-9)
+    assert half[2] == pytest.approx(0.15 + 0.5 * (drawn[2] - 0.15), abs=1e-9)
+    np.testing.assert_allclose(half[:2], drawn[:2], atol=1e-9)  # the horizontal goal is left alone
+
+
 def test_test_split_uses_held_out_goals():
     def goals(split: str) -> set[tuple]:
         env = taskforge.make(PICK_PLACE, stage="place", split=split, seed=0)

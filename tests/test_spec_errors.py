@@ -71,6 +71,7 @@ CATALOGUE = [
         backend={"type": "gymnasium", "env": "Pendulum-v1"}, randomization={},
         stages=[{**d["stages"][0], "success": {"all": [{"feature": "native_return", "above": 0}]}}]), "stages[0].rewards[0].term", "reads tcp_to_object_distance, which the gymnasium backend does not provide"),
     ("latency-reversed", _set(["randomization", "action_latency"], {"min_steps": 3, "max_steps": 1}), "randomization.action_latency", "'min_steps' (3) must be <= 'max_steps' (1)"),
+    ("height-scale-without-height", _set(["stages", 1, "goal"], {"height_scale": 0.5}), "stages[1].goal", "set height to a number or 'object' (got 'keep')"),
     ("distance-scale-range", _set(["stages", 1, "goal", "distance_scale"], 1.5), "stages[1].goal.distance_scale", "less than or equal to 1"),
     ("unmatched-body-name", _set(["randomization", "physics", 0, "names"], ["no_such_body"]), "randomization.physics[0].names[0]", "matches no body"),
     ("gravity-with-names", _set(["randomization", "physics", 4, "names"], ["world"]), "randomization.physics[4].names", "gravity has no named elements"),

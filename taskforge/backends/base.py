@@ -26,6 +26,7 @@ class GoalOverride:
 
     height: Literal["keep", "object"] | float = "keep"
     distance_scale: float = 1.0
+    height_scale: float = 0.0
 
     @property
     def is_identity(self) -> bool:

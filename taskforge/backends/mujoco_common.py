@@ -39,13 +39,13 @@ _DIVERGENCE_WARNINGS = slice(_BAD[0], _BAD[0] + 3)
 
 def override_goal(goal: np.ndarray, rest: np.ndarray, override: GoalOverride) -> np.ndarray:
     """The goal a stage asks for (`GoalOverrideSpec`): its horizontal distance from the object's
-    resting place scaled, its height kept, set to the object's or to a number."""
+    resting place scaled, its height kept or moved towards the object's or a number (onto it
+    with `height_scale` 0)."""
     out = np.array(goal, dtype=float)
     out[:2] = rest[:2] + override.distance_scale * (out[:2] - rest[:2])
-    if override.height == "object":
-        out[2] = rest[2]
-    elif override.height != "keep":
-        out[2] = float(override.height)
+    if override.height != "keep":
+        plane = rest[2] if override.height == "object" else float(override.height)
+        out[2] = plane + override.height_scale * (out[2] - plane)
     return out
 
 

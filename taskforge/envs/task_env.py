@@ -196,7 +196,7 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._backlash.reset(rng)
 
         stage = self.stages[self.stage]
-        goal = GoalOverride(stage.spec.goal.height, stage.spec.goal.distance_scale)
+        goal = GoalOverride(stage.spec.goal.height, stage.spec.goal.distance_scale, stage.spec.goal.height_scale)
         object_rng = np.random.default_rng(self._object_seed) if self._random_object else None
         obs = self.backend.reset(name, self.split, goal_index, goal, object_rng)
         self._t = 0

@@ -62,11 +62,20 @@ class GoalOverrideSpec(StrictModel):
     `height: object` puts the goal on the table at the object's resting height (a push stage);
     a number sets the goal height in metres; `keep` leaves it. `distance_scale` moves the goal
     towards the object's start in the horizontal plane (1 = unchanged, 0 = on the object),
-    a classic way to make the early stages easy.
+    a classic way to make the early stages easy. `height_scale` does the same vertically: the
+    goal's drawn height is moved towards `height` (0 = onto it, 1 = unchanged), so a curriculum
+    can start with every goal on one plane and grow the plane back into the task's box.
     """
 
     height: Literal["keep", "object"] | float = "keep"
     distance_scale: float = Field(default=1.0, ge=0.0, le=1.0)
+    height_scale: float = Field(default=0.0, ge=0.0, le=1.0)
+
+    @model_validator(mode="after")
+    def _scale_needs_a_height(self) -> GoalOverrideSpec:
+        if self.height == "keep" and self.height_scale != 0.0:
+            raise ValueError("height_scale moves the goal's height towards 'height'; set height to a number or 'object' (got 'keep')")
+        return self
 
 
 class StageSpec(StrictModel):
