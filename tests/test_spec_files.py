@@ -20,6 +20,7 @@ MEMORYLESS_BASELINES = {
     "benchmarks/configs/ml1_push_ppo_hold.yaml",
     "benchmarks/configs/ml1_reach_ppo.yaml",
     "benchmarks/configs/ml1_reach_ppo_zone_find.yaml",
+    "benchmarks/configs/ml1_reach_ppo_zone_plane.yaml",
     "benchmarks/configs/point_semicircle_ppo.yaml",
 }
 """PPO on a hidden goal on purpose: the baselines RL² is measured against."""
