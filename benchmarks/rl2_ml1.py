@@ -5,7 +5,7 @@ of RL² next to a memoryless PPO baseline.
     python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
                                  rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
                                  rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid
-                                 rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow ppo-reach-zone-find ppo-reach-zone-plane
+                                 rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane ppo-reach-zone-find ppo-reach-zone-plane
                                  rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold
                                  ppo-reach rl2-push ppo-push rl2-pick-place]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
@@ -66,6 +66,7 @@ VARIANTS = {
     "rl2-reach-zone-find-short": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find_short.yaml",
     "rl2-reach-zone-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_plane.yaml",
     "rl2-reach-zone-grow": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_grow.yaml",
+    "rl2-reach-zone-box-from-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane.yaml",
     "ppo-reach-zone-find": ROOT / "benchmarks/configs/ml1_reach_ppo_zone_find.yaml",
     "ppo-reach-zone-plane": ROOT / "benchmarks/configs/ml1_reach_ppo_zone_plane.yaml",
     "ppo-reach": ROOT / "benchmarks/configs/ml1_reach_ppo.yaml",

@@ -65,6 +65,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
                     space = agent_observation_space(curriculum.agent, shapes.observation_space, shapes.action_space)
                     load_demos_file(curriculum, space.shape[0])
+                if curriculum.init_from is not None:  # the weights, as `train` will load them
+                    from taskforge.run import build_agent
+                    from taskforge.training import load_init_from
+
+                    agent, _ = build_agent(curriculum.agent, [(p.task, p.task_file) for p in curriculum.phases],
+                                           curriculum.spec.seed, path, curriculum.agent_file)
+                    load_init_from(curriculum, agent)
                 lines = curriculum_summary(curriculum)
                 for warning in curriculum.warnings:
                     print(f"warning: {warning}", file=sys.stderr)

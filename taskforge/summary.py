@@ -110,6 +110,9 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
         f"{spec.evaluation.split} {'trials' if cur.agent.algo == 'rl2' else 'episodes'}"
         f"{' of every task of every phase' if spec.evaluation.tasks == 'all' else ''}; checkpoint every {spec.checkpoint.every_steps:,} steps"
     )
+    if cur.init_from is not None:
+        learnt = "model and data" if cur.agent.algo == "mpc" else "networks and normaliser statistics"
+        lines.append(f"  start from the {learnt} of {cur.init_from} (optimizer, steps and curriculum fresh)")
     ws = spec.warm_start
     if ws is not None:
         tasks = " + ".join(f"{p.task.name}:{ws.stage or p.stages[-1]}" for p in cur.warm_start_phases())

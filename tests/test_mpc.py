@@ -124,7 +124,8 @@ def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(t
     """400 random steps, then planning with the model refitted every 400 steps: the held-out goals
     (20, on the semicircle, 1 m away, within 0.1 m) are reached within 2,000 steps, where random
     actions never do. Then `--resume` continues with the model's data (and the terminal value's
-    weights), and `taskforge eval` plays it."""
+    weights), `taskforge eval` plays it, and a curriculum with `init_from` starts from its model
+    and data."""
     cur = write(tmp_path, total_steps=1600, mpc=mpc)
     run = train(cur, run_dir=tmp_path / "run", progress=False)
     first = read_jsonl(run / "metrics.jsonl")
@@ -142,6 +143,13 @@ def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(t
     # with the value: V has seen 2,400 steps of data here and adds its error to short plans
     # (0.75 measured at the fixed seed); random actions reach none of these goals
     assert row["success_rate"] >= (0.6 if mpc else 0.8), row
+    if not mpc:  # `init_from`: a new curriculum starts from this run's model and data
+        rarely = {"every_steps": 100_000, "episodes": 20, "split": "test"}  # planning is the cost: evaluate at the start only
+        continued = train(write(tmp_path, total_steps=400, init_from="run", evaluation=rarely), run_dir=tmp_path / "continued", progress=False)
+        start, first = read_jsonl(continued / "metrics.jsonl")[:2]
+        # it plans with the loaded model before any update of its own: the held-out goals are reached
+        assert start["step"] == 0 and start["eval_success_rate"] >= 0.8, start
+        assert first["step"] == 400 and first["buffer_size"] == 2400.0 + 400.0  # and refits on the source's data too
 
 
 def test_mpc_agent_files_are_checked_like_any_other(tmp_path, capsys):
@@ -191,3 +199,4 @@ def test_validate_describes_the_mpc_warm_start_as_the_models_data(capsys, monkey
     assert main(["validate", "benchmarks/configs/mpc_pick_place_demos.yaml"]) == 0
     [line] = [x for x in capsys.readouterr().out.splitlines() if "warm start from" in x]
     assert "seed the dynamics model's data" in line and "BC" not in line
+

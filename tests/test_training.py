@@ -292,6 +292,52 @@ def test_bad_cli_input_is_one_line_and_exit_2(args, fragment, tmp_path, capsys, 
     assert len(err) == 1 and fragment in err[0], err
 
 
+def test_init_from_starts_with_another_runs_weights_and_statistics_but_a_fresh_count(tmp_path):
+    source = train(write_curriculum(tmp_path, total_steps=400), run_dir=tmp_path / "source", progress=False)
+    learnt = load_checkpoint(source / "final.pt")["agent"]
+    # the same task and networks with a learning rate too small to move a weight: whatever the
+    # new run ends with, it started from
+    (tmp_path / "still.yaml").write_text(yaml.safe_dump({**AGENT, "ppo": {**AGENT["ppo"], "learning_rate": 1e-12}}))
+    cur = write_curriculum(tmp_path, total_steps=200, agent="still.yaml", init_from="source")
+    run = train(cur, run_dir=tmp_path / "continued", progress=False)
+    state = load_checkpoint(run / "final.pt")["agent"]
+    for key, value in learnt["policy"].items():
+        torch.testing.assert_close(state["policy"][key], value, atol=1e-6, rtol=0, msg=key)
+    records = read_jsonl(run / "metrics.jsonl")
+    assert state["global_step"] == 200 and [m["step"] for m in records] == [0, 200]
+    assert "eval_success_rate" in records[0]  # evaluated before the first update: the curve starts at the loaded weights
+    # the statistics carried on: the source's samples plus this run's
+    assert int(state["obs_normalizer"]["count"]) > int(learnt["obs_normalizer"]["count"]) > 0
+    # and the same run without init_from ends elsewhere: the check above is not of a fixed point
+    fresh = train(write_curriculum(tmp_path, total_steps=200, agent="still.yaml"), run_dir=tmp_path / "fresh", progress=False)
+    first = next(iter(learnt["policy"]))
+    assert not torch.allclose(load_checkpoint(fresh / "final.pt")["agent"]["policy"][first], learnt["policy"][first], atol=1e-3)
+
+
+@pytest.mark.parametrize("case", ["other-network", "missing", "with-warm-start"])
+def test_init_from_that_cannot_be_used_is_one_line_and_writes_nothing(case, tmp_path, capsys):
+    if case != "missing":
+        train(write_curriculum(tmp_path, total_steps=200), run_dir=tmp_path / "source", progress=False)
+    overrides: dict = {"init_from": "source"}
+    if case == "other-network":
+        (tmp_path / "wide.yaml").write_text(yaml.safe_dump({**AGENT, "policy": {"hidden_sizes": [48, 32]}}))
+        overrides["agent"] = "wide.yaml"
+    if case == "with-warm-start":
+        overrides["warm_start"] = {"generate_episodes": 2}
+    cur = write_curriculum(tmp_path, **overrides)
+    capsys.readouterr()  # the source run's progress lines
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {cur}: init_from: "), err
+    expected = {
+        "other-network": "does not fit this curriculum's agent: its policy '",
+        "missing": f"no such run directory or checkpoint file: {tmp_path / 'source'}",
+        "with-warm-start": "expected one of init_from (a trained run) and warm_start (demonstrations)",
+    }[case]
+    assert expected in err[0]
+    assert not (tmp_path / "run").exists()
+
+
 def test_unknown_agent_and_bad_yaml_in_curriculum(tmp_path, capsys):
     cur = write_curriculum(tmp_path, agent="agents/nope.yaml")
     assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2

@@ -31,6 +31,7 @@ from taskforge.agents.ppo import PPOAgent, PPOLoss, explained_variance, ppo_loss
 from taskforge.agents.rl2 import RL2Trial, agent_observation_space, trial_observation_space, wrap_for_training
 from taskforge.agents.runtime import check_same_step_autoreset, make_vector_env, set_torch_threads
 from taskforge.agents.storage import Minibatch, RolloutBuffer
+from taskforge.agents.weights import WeightsMismatch
 from taskforge.spec.agent import AgentSpec
 
 Agent = PPOAgent | MPCAgent
@@ -57,6 +58,7 @@ __all__ = [
     "RolloutBuffer",
     "RunningMeanStd",
     "SquashGaussian",
+    "WeightsMismatch",
     "agent_observation_space",
     "check_same_step_autoreset",
     "compute_gae",

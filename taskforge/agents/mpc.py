@@ -33,6 +33,7 @@ from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan, shift
 from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
 from taskforge.agents.value import TerminalValue
+from taskforge.agents.weights import WeightsMismatch, load_matching, require
 from taskforge.spec.agent import AgentSpec
 
 OnStep = Callable[[np.ndarray, np.ndarray, np.ndarray, dict], None]
@@ -235,6 +236,26 @@ class MPCAgent:
         if self.value is not None:
             state |= {"value": self.value.state_dict(), "value_optimizer": self.value_optimizer.state_dict()}
         return state
+
+    def load_weights(self, state: dict) -> None:
+        """Start from another run's learnt model (`init_from`): the ensemble (with its input and
+        target statistics), the terminal value where both have one, and the transitions the model
+        was fitted on, since each update refits on the buffer and would otherwise forget what the
+        data taught. The optimizer, RNG and counters stay this run's. `WeightsMismatch` if they
+        do not fit."""
+        require(state, ("model", "buffer"), "MPC")
+        load_matching(self.model, state["model"], "dynamics model")
+        if (self.value is None) != ("value" not in state):
+            have = "has no terminal value" if self.value is not None else "has a terminal value this agent lacks"
+            raise WeightsMismatch(f"it {have} (mpc.terminal_value differs)")
+        if self.value is not None:
+            load_matching(self.value, state["value"], "terminal value")
+        rows = state["buffer"]["rewards"]
+        if len(rows) > self.buffer.capacity:
+            raise WeightsMismatch(f"its {len(rows):,} transitions exceed this agent's mpc.buffer_size ({self.buffer.capacity:,})")
+        self.buffer.load_state_dict(state["buffer"])
+        if len(rows) < self.buffer.capacity:  # a larger buffer appends after the loaded rows
+            self.buffer.cursor = len(rows)
 
     def load_state_dict(self, state: dict) -> None:
         self.model.load_state_dict(state["model"])

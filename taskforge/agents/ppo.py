@@ -32,6 +32,7 @@ from taskforge.agents.policies import ActorCritic, RecurrentState
 from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
 from taskforge.agents.sequences import DemoRows, columns_per_batch, demo_rows
 from taskforge.agents.storage import Minibatch, RolloutBuffer
+from taskforge.agents.weights import WeightsMismatch, load_matching, require
 from taskforge.spec.agent import AgentSpec, PPOSpec
 
 OnStep = Callable[[np.ndarray, np.ndarray, np.ndarray, dict], None]
@@ -470,6 +471,19 @@ class PPOAgent:
             "critic_warmup_until": self.critic_warmup_until,
             "observation_stats_frozen": self.observation_stats_frozen,
         }
+
+    def load_weights(self, state: dict) -> None:
+        """Start from another run's learnt policy (`init_from`): its networks and the statistics
+        they were trained on (observation and reward normalisers; a network fed other statistics
+        sees other inputs). The optimizer, RNG, counters and learning-rate schedule stay this
+        run's: the new curriculum is a new run. `WeightsMismatch` if they do not fit."""
+        require(state, ("policy", "obs_normalizer", "privileged_normalizer", "reward_scaler"), "PPO or RL²")
+        load_matching(self.policy, state["policy"], "policy")
+        for name in ("obs_normalizer", "privileged_normalizer", "reward_scaler"):
+            rms = getattr(self, name).rms
+            if tuple(state[name]["mean"].shape) != tuple(rms.mean.shape):
+                raise WeightsMismatch(f"its {name} has {tuple(state[name]['mean'].shape)} statistics, this agent {tuple(rms.mean.shape)}")
+            rms.load_state_dict(state[name])
 
     def load_state_dict(self, state: dict) -> None:
         self.policy.load_state_dict(state["policy"])

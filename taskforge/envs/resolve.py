@@ -49,6 +49,8 @@ class ResolvedCurriculum:
     phases: list[CurriculumPhase]
     demos_file: Path | None = None
     """`warm_start.demos`, resolved relative to the curriculum file."""
+    init_from: Path | None = None
+    """`init_from` (a run directory or checkpoint file), resolved relative to the curriculum file."""
     warnings: tuple[str, ...] = ()
     """Legal but probably unintended (see `curriculum_warnings`): `validate` and `train` print them
     and `train` writes them to the run's events."""
@@ -86,10 +88,18 @@ def load_curriculum(path: str | Path) -> ResolvedCurriculum:
     demos_file = None
     if spec.warm_start is not None and not issues:
         demos_file = _check_warm_start(spec, path, agent, phases, issues)
+    init_from = None
+    if spec.init_from is not None:
+        init_from = resolve_relative(path, spec.init_from)
+        if spec.warm_start is not None:
+            msg = "both set the policy a run starts from; expected one of init_from (a trained run) and warm_start (demonstrations)"
+            issues.append(SpecIssue(str(path), "init_from", msg))
+        elif not init_from.exists():
+            issues.append(SpecIssue(str(path), "init_from", f"no such run directory or checkpoint file: {init_from}"))
     if issues:
         raise SpecError(issues)
     warnings = tuple(curriculum_warnings(path, agent, phases))
-    return ResolvedCurriculum(path, spec, agent_file, agent, phases, demos_file, warnings)
+    return ResolvedCurriculum(path, spec, agent_file, agent, phases, demos_file, init_from, warnings)
 
 
 def curriculum_warnings(path: Path, agent: AgentSpec, phases: list[CurriculumPhase]) -> list[str]:

@@ -206,3 +206,11 @@ class CurriculumSpec(StrictModel):
     checkpoint: CheckpointSpec = CheckpointSpec()
     warm_start: WarmStartSpec | None = None
     """Behaviour-cloning warm start from demonstrations; none by default."""
+    init_from: str | None = None
+    """A run directory (its final policy, else its latest checkpoint) or checkpoint file, relative
+    to this file, whose learnt weights the run starts from: the networks and the statistics they
+    were trained on (and an MPC agent's data); the optimizer, step count, learning-rate schedule
+    and curriculum start fresh. Why: to carry what one curriculum taught into another (a search
+    learnt on one plane of a box into the whole box, a policy into a new robot variant) without
+    learning it again. The agent preset must build the same networks. Read only when a run
+    starts, not on `--resume`."""

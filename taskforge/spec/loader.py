@@ -53,7 +53,7 @@ def validate(model: type[M], data: dict[str, Any], file: str | Path) -> M:
 
 # Fields that hold paths (relative to the file that writes them); "*" stands for every item of a list.
 _TASK_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("backend", "robot_model"),)
-_CURRICULUM_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("agent",), ("phases", "*", "task"), ("warm_start", "demos"))
+_CURRICULUM_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("agent",), ("phases", "*", "task"), ("warm_start", "demos"), ("init_from",))
 _SWEEP_PATH_FIELDS: tuple[tuple[str, ...], ...] = (("curriculum",),)
 
 

@@ -24,7 +24,7 @@ from gymnasium.vector import VectorEnv
 from pydantic import BaseModel, ValidationError
 from tqdm import tqdm
 
-from taskforge.agents import Agent, make_vector_env, set_torch_threads, wrap_for_training
+from taskforge.agents import Agent, WeightsMismatch, make_vector_env, set_torch_threads, wrap_for_training
 from taskforge.curriculum import CurriculumScheduler
 from taskforge.envs import PhasedEnv, ResolvedCurriculum, load_curriculum
 from taskforge.rollouts import StageResult, evaluate_rows, summarize
@@ -89,6 +89,8 @@ def train(
     if start.state:
         agent.load_state_dict(start.state["agent"])
         scheduler.load_state_dict(start.state["curriculum"])
+    elif cur.init_from is not None:
+        load_init_from(cur, agent)
     # demos: pretraining (fresh runs only) and PPO's decaying BC term; writes no file yet
     warm = prepare_warm_start(cur, agent, run, start.seed, resumed=start.state is not None, progress=progress)
 
@@ -106,6 +108,10 @@ def train(
             warm.metrics.update(_eval_metrics(results))
             session.say(_eval_line(results, "after pretraining"))
         warm.record(run, session.logger)
+    if start.state is None and cur.init_from is not None:  # the curve starts where the loaded weights stand on this curriculum
+        results = session.evaluate()
+        session.logger.log(0, _eval_metrics(results))
+        session.say(_eval_line(results, f"from {cur.init_from.name}"))
     session.run(until=start.total if stop_at is None else min(start.total, stop_at))
     return run.path
 
@@ -147,6 +153,23 @@ def _start(cur: ResolvedCurriculum, run: RunDir, seed: int | None, steps: int | 
     seed = cur.spec.seed if seed is None else seed
     total = steps or (state["config"]["total_steps"] if state else cur.spec.total_steps)
     return _Start(seed, total, run_config(cur, seed, total), state)
+
+
+def load_init_from(cur: ResolvedCurriculum, agent: Agent) -> None:
+    """`agent` (fresh, built for `cur`) takes the learnt weights of the run `cur`'s `init_from`
+    names. A run without a policy yet, an unreadable file or weights that do not fit are one
+    `SpecError` at `init_from`, raised before anything is written (`validate` calls this too)."""
+    assert cur.init_from is not None
+    try:
+        source = RunDir(cur.init_from).policy_checkpoint() if cur.init_from.is_dir() else cur.init_from
+        state = load_checkpoint(source)
+    except SpecError as exc:
+        raise SpecError.single(cur.file, "init_from", str(exc.issues[0])) from None
+    try:
+        agent.load_weights(state["agent"])
+    except WeightsMismatch as exc:
+        raise SpecError.single(cur.file, "init_from", f"{source} does not fit this curriculum's agent: {exc} "
+                               "(expected a run of the same algo, network sizes and observation)") from None
 
 
 # ------------------------------------------------------------------------------ the loop
