@@ -5,7 +5,7 @@ of RL² next to a memoryless PPO baseline.
     python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
                                  rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
                                  rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid
-                                 rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane ppo-reach-zone-find ppo-reach-zone-plane
+                                 rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-k10 ppo-reach-zone-find ppo-reach-zone-plane
                                  rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold
                                  ppo-reach rl2-push ppo-push rl2-pick-place]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
@@ -13,8 +13,9 @@ of RL² next to a memoryless PPO baseline.
 The full budget takes many hours on 2 cores, so the script works in chunks (like
 pick_place_curriculum.py): each call advances every run by at most `--chunk-steps`, resuming
 from its checkpoint, then evaluates the checkpoint on `--trials` trials of the ML1 train goals
-(meta-train) and of the 50 held-out goals (meta-test), each trial K = 5 episodes from a fresh
-hidden state (the PPO baseline plays the same trials; it cannot adapt, so its curve is flat),
+(meta-train) and of the 50 held-out goals (meta-test), each trial K episodes from a fresh
+hidden state (K the agent's `rl2.trial_episodes`: 5, 10 for the -k10 variant; the PPO baseline
+plays trials of 5; it cannot adapt, so its curve is flat),
 once acting with the policy's mean and once sampling from it (as Duan et al.'s meta-test; an RL²
 policy's first-episode search may live in its sampling noise). A finished run given again gets
 any evaluation it lacks. Evaluations are kept in each run's `meta_evals.jsonl`; the table and
@@ -67,6 +68,7 @@ VARIANTS = {
     "rl2-reach-zone-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_plane.yaml",
     "rl2-reach-zone-grow": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_grow.yaml",
     "rl2-reach-zone-box-from-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane.yaml",
+    "rl2-reach-zone-box-from-plane-k10": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane_k10.yaml",
     "ppo-reach-zone-find": ROOT / "benchmarks/configs/ml1_reach_ppo_zone_find.yaml",
     "ppo-reach-zone-plane": ROOT / "benchmarks/configs/ml1_reach_ppo_zone_plane.yaml",
     "ppo-reach": ROOT / "benchmarks/configs/ml1_reach_ppo.yaml",
@@ -79,11 +81,11 @@ VARIANTS = {
     "rl2-pick-place": ROOT / "benchmarks/configs/ml1_pick_place_rl2.yaml",
 }
 RUNS = ROOT / "benchmarks/runs/rl2"
-TRIAL_EPISODES = 5  # agents/rl2.yaml's K; the PPO baseline is evaluated over the same trials
+TRIAL_EPISODES = 5  # agents/rl2.yaml's K; a PPO baseline is evaluated over trials of this many episodes
 
 
 def meta_evaluate(
-    run_dir: Path, step: int, trials: int, sampled: bool, trial_episodes: int = TRIAL_EPISODES,
+    run_dir: Path, step: int, trials: int, sampled: bool, trial_episodes: int | None = None,
     splits: tuple[str, ...] = ("train", "test"),
 ) -> list[dict]:
     """Meta-train and meta-test evaluation (`splits`) of the run's checkpoint at `step`, cached per step.
@@ -94,9 +96,13 @@ def meta_evaluate(
     Cache entries written before this option had no `sampled` key: they are mean-action ones.
     The stage evaluated is the one the run's curriculum evaluates (`evaluation.stage`, read from
     the run's config.json: e.g. the last of a curriculum of stages), else the run's first, the
-    only one of a one-stage curriculum."""
+    only one of a one-stage curriculum. A trial has `trial_episodes` episodes, by default the
+    run's own K (`rl2.trial_episodes` of its agent; TRIAL_EPISODES for a memoryless baseline)."""
     run = RunDir(run_dir)
-    stage = json.loads(run.config.read_text())["curriculum"]["evaluation"]["stage"]
+    config = json.loads(run.config.read_text())
+    stage = config["curriculum"]["evaluation"]["stage"]
+    if trial_episodes is None:
+        trial_episodes = config["agent"]["rl2"]["trial_episodes"] if config["agent"]["algo"] == "rl2" else TRIAL_EPISODES
     cache = run_dir / "meta_evals.jsonl"
     done = [e for e in read_jsonl(cache) if e["step"] == step and e["trials"] == trials and e.get("sampled", False) == sampled]
     for split in splits:
@@ -166,19 +172,19 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
         steps = [np.mean(p["steps"]) for p in points]
         for k, style in ((0, "--"), (-1, "-")):
             mean = [np.mean([curve[k] for curve in p["test"]]) for p in points]
-            label = f"{variant}, episode {1 if k == 0 else TRIAL_EPISODES} ({len(seeds)} seed{'s' * (len(seeds) > 1)})"
+            label = f"{variant}, episode {1 if k == 0 else len(points[0]['test'][0])} ({len(seeds)} seed{'s' * (len(seeds) > 1)})"
             ax.plot(steps, mean, style, marker="o", color=colour, label=label)
         complete = [p for p in points if len(p["steps"]) == len(seeds)]
         if complete:
             curve = np.mean(complete[-1]["test"], axis=0)
             at = f"{int(np.mean(complete[-1]['steps'])):,}"
-            ax_adapt.plot(range(1, TRIAL_EPISODES + 1), curve, "o-", color=colour, label=f"{variant} at ~{at} steps")
+            ax_adapt.plot(range(1, len(curve) + 1), curve, "o-", color=colour, label=f"{variant} at ~{at} steps")
     ax.set_xlabel("environment steps")
     ax.set_ylabel("meta-test success (held-out goals)")
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=7, handlelength=4)  # long enough handles to show episode 1's dashes
     ax.set_title("ML1, goal hidden: meta-test success vs steps")
-    ax_adapt.set_xticks(range(1, TRIAL_EPISODES + 1))
+    ax_adapt.set_xticks(range(1, 11))  # K = 5, or 10 for the *-k10 variants
     ax_adapt.set_xlabel("episode of the trial")
     ax_adapt.set_ylim(-0.02, 1.02)
     ax_adapt.legend(fontsize=7)
@@ -211,7 +217,7 @@ def main() -> None:
                 "variant": variant, "seed": seed, "steps_done": run.steps_done(),
                 "evals": [e for e in read_jsonl(run_dir / "meta_evals.jsonl") if e["trials"] == args.trials],
                 "train_last_episode_success": [(m["step"], m["success_rate"]) for m in metrics if m.get("success_rate") is not None],
-                "steps_per_s": float(np.median([m["steps_per_s"] for m in metrics])),
+                "steps_per_s": float(np.median([m["steps_per_s"] for m in metrics if "steps_per_s" in m])),  # not in an evaluation-only record (step 0 of an init_from run)
             }
 
     rows = []
@@ -220,7 +226,7 @@ def main() -> None:
             low, high = min(point["steps"]), max(point["steps"])
             rows.append([variant, f"{low:,}" if low == high else f"{low:,}-{high:,}", len(point["steps"]),
                          *(episode_ends(point[key], count_seeds=key.endswith("sampled")) for key in SPLITS)])
-    episodes = f"ep 1 -> {TRIAL_EPISODES}"
+    episodes = "ep 1 -> K"
     print_table(["variant", "env steps", "seeds", f"meta-train {episodes}", f"meta-test {episodes}",
                  f"sampled: meta-train {episodes} (seeds)", f"sampled: meta-test {episodes} (seeds)"], rows)
     missing = len(args.variants) * len(args.seeds) - len(runs)
@@ -228,7 +234,7 @@ def main() -> None:
     print(f"remaining: {remaining:,} env steps ({len(runs)} runs started, {missing} not started)")
     print(f"curves: {plot_curves(runs, RESULTS / 'rl2_ml1.png')}")
     write_result("rl2_ml1", {"variants": args.variants, "seeds": args.seeds, "steps": args.steps, "trials": args.trials,
-                             "trial_episodes": TRIAL_EPISODES, "runs": runs, "remaining_steps": remaining,
+                             "trial_episodes": {r["variant"]: len(r["evals"][0]["per_episode"]) for r in runs.values() if r["evals"]}, "runs": runs, "remaining_steps": remaining,
                              "complete": remaining == 0})
 
 
