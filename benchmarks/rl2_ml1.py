@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -41,7 +42,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
-from taskforge.run import RunDir, read_jsonl  # noqa: E402
+from taskforge.run import RunDir, load_checkpoint, read_jsonl, save_checkpoint  # noqa: E402
+from taskforge.spec import SpecError, resolve_relative  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {
@@ -86,7 +88,7 @@ TRIAL_EPISODES = 5  # agents/rl2.yaml's K; a PPO baseline is evaluated over tria
 
 def meta_evaluate(
     run_dir: Path, step: int, trials: int, sampled: bool, trial_episodes: int | None = None,
-    splits: tuple[str, ...] = ("train", "test"),
+    splits: tuple[str, ...] = ("train", "test"), checkpoint: Path | None = None,
 ) -> list[dict]:
     """Meta-train and meta-test evaluation (`splits`) of the run's checkpoint at `step`, cached per step.
 
@@ -97,7 +99,8 @@ def meta_evaluate(
     The stage evaluated is the one the run's curriculum evaluates (`evaluation.stage`, read from
     the run's config.json: e.g. the last of a curriculum of stages), else the run's first, the
     only one of a one-stage curriculum. A trial has `trial_episodes` episodes, by default the
-    run's own K (`rl2.trial_episodes` of its agent; TRIAL_EPISODES for a memoryless baseline)."""
+    run's own K (`rl2.trial_episodes` of its agent; TRIAL_EPISODES for a memoryless baseline).
+    `checkpoint`: another file to play as the run's step `step` (`starting_point`)."""
     run = RunDir(run_dir)
     config = json.loads(run.config.read_text())
     stage = config["curriculum"]["evaluation"]["stage"]
@@ -108,7 +111,7 @@ def meta_evaluate(
     for split in splits:
         if any(e["split"] == split for e in done):
             continue
-        report = evaluate_run(run.checkpoint, split=split, trials=trials, trial_episodes=trial_episodes,
+        report = evaluate_run(checkpoint or run.checkpoint, split=split, trials=trials, trial_episodes=trial_episodes,
                               deterministic=not sampled, stages=[stage] if stage else None)
         row = report["rows"][0]
         entry = {"step": step, "split": split, "trials": trials, "sampled": sampled, "success_rate": row["success_rate"],
@@ -120,6 +123,28 @@ def meta_evaluate(
             f.write(json.dumps(entry) + "\n")
         done.append(entry)
     return done
+
+
+def evaluate_starting_point(run_dir: Path, trials: int) -> None:
+    """An `init_from` run's step 0, meta-evaluated as every later checkpoint is: the weights it
+    started from, saved with the run's own config (so they play its task and stage) in a
+    temporary file. Why: the run's own evaluation before its first update has 10 trials; the
+    comparison with what the run made of them needs the same 50. Nothing for a run started from
+    scratch, or whose source has no policy on this machine (final policies are not committed)."""
+    config = json.loads(RunDir(run_dir).config.read_text())
+    source = config["curriculum"].get("init_from")
+    if source is None:
+        return
+    source = resolve_relative(config["curriculum_file"], source)
+    try:
+        state = load_checkpoint(RunDir(source).policy_checkpoint() if source.is_dir() else source)
+    except SpecError:
+        return
+    with tempfile.TemporaryDirectory() as folder:
+        start = Path(folder) / "start.pt"
+        save_checkpoint({"config": config, "agent": state["agent"], "curriculum": {}}, start)
+        for sampled in (False, True):
+            meta_evaluate(run_dir, 0, trials, sampled, checkpoint=start)
 
 
 SPLITS = ("train", "test", "train_sampled", "test_sampled")  # mean-action and sampled-action evaluations
@@ -209,6 +234,7 @@ def main() -> None:
                 step = advance_run(VARIANTS[variant], run_dir, seed, args.steps, args.chunk_steps)
                 for sampled in (False, True):  # a finished run gets any evaluation it lacks
                     meta_evaluate(run_dir, step, args.trials, sampled)
+                evaluate_starting_point(run_dir, args.trials)
                 print(f"{variant} seed {seed}: {step:,} / {args.steps:,} steps ({time.perf_counter() - start:.0f} s this call)", flush=True)
             if not run.metrics.exists():
                 continue
