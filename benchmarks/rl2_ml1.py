@@ -5,7 +5,7 @@ of RL² next to a memoryless PPO baseline.
     python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
                                  rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
                                  rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid
-                                 rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-k10 ppo-reach-zone-find ppo-reach-zone-plane
+                                 rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-long ppo-reach-zone-find ppo-reach-zone-plane
                                  rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold
                                  ppo-reach rl2-push ppo-push rl2-pick-place]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
@@ -14,7 +14,7 @@ The full budget takes many hours on 2 cores, so the script works in chunks (like
 pick_place_curriculum.py): each call advances every run by at most `--chunk-steps`, resuming
 from its checkpoint, then evaluates the checkpoint on `--trials` trials of the ML1 train goals
 (meta-train) and of the 50 held-out goals (meta-test), each trial K episodes from a fresh
-hidden state (K the agent's `rl2.trial_episodes`: 5, 10 for the -k10 variant; the PPO baseline
+hidden state (K the agent's `rl2.trial_episodes`, 5 for every shipped variant; the PPO baseline
 plays trials of 5; it cannot adapt, so its curve is flat),
 once acting with the policy's mean and once sampling from it (as Duan et al.'s meta-test; an RL²
 policy's first-episode search may live in its sampling noise). A finished run given again gets
@@ -70,7 +70,7 @@ VARIANTS = {
     "rl2-reach-zone-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_plane.yaml",
     "rl2-reach-zone-grow": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_grow.yaml",
     "rl2-reach-zone-box-from-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane.yaml",
-    "rl2-reach-zone-box-from-plane-k10": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane_k10.yaml",
+    "rl2-reach-zone-box-from-plane-long": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane_long.yaml",
     "ppo-reach-zone-find": ROOT / "benchmarks/configs/ml1_reach_ppo_zone_find.yaml",
     "ppo-reach-zone-plane": ROOT / "benchmarks/configs/ml1_reach_ppo_zone_plane.yaml",
     "ppo-reach": ROOT / "benchmarks/configs/ml1_reach_ppo.yaml",
@@ -209,7 +209,7 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=7, handlelength=4)  # long enough handles to show episode 1's dashes
     ax.set_title("ML1, goal hidden: meta-test success vs steps")
-    ax_adapt.set_xticks(range(1, 11))  # K = 5, or 10 for the *-k10 variants
+    ax_adapt.set_xticks(range(1, 1 + max((len(r["evals"][0]["per_episode"]) for r in runs.values() if r["evals"]), default=TRIAL_EPISODES)))
     ax_adapt.set_xlabel("episode of the trial")
     ax_adapt.set_ylim(-0.02, 1.02)
     ax_adapt.legend(fontsize=7)

@@ -28,7 +28,7 @@ MEMORYLESS_BASELINES = {
 
 CONTINUE_A_RUN = {
     "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-plane-seed0",
-    "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane_k10.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-plane-seed0",
+    "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane_long.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-plane-seed0",
 }
 """Curricula whose `init_from` names a benchmark run that a fresh clone does not hold (final
 policies are not committed): until that run exists, `validate` must refuse them in one line."""
