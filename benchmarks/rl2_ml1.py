@@ -30,6 +30,7 @@ a 256-unit GRU and PPO (appendix Table 10), for far more env steps than fit here
 
 from __future__ import annotations
 
+import itertools
 import json
 import sys
 import tempfile
@@ -189,7 +190,10 @@ def plot_curves(runs: dict[str, dict], out: Path) -> Path:
     plt = pyplot()
 
     fig, (ax, ax_adapt) = plt.subplots(1, 2, figsize=(11, 4), width_ratios=[3, 2])
-    for colour, variant in zip(plt.rcParams["axes.prop_cycle"].by_key()["color"], VARIANTS):
+    # every variant with runs, colours repeating (zip over the 10-colour cycle alone dropped all
+    # variants after the tenth); ask for fewer --variants to read one comparison
+    shown = [v for v in VARIANTS if any(r["variant"] == v for r in runs.values())]
+    for colour, variant in zip(itertools.cycle(plt.rcParams["axes.prop_cycle"].by_key()["color"]), shown):
         seeds = [r for r in runs.values() if r["variant"] == variant]
         points = evaluation_points(seeds)
         if not points:
