@@ -61,14 +61,21 @@ def first_success(env: TaskEnv, goal_index: int, seed: int, steps: int) -> int |
     env.reset(seed=seed, options={"goal_index": goal_index})
     waypoints, k = raster(), 0
     for t in range(1, steps + 1):
-        hand = np.asarray(env.unwrapped.backend.features()["tcp_pos"])
-        if k < len(waypoints) - 1 and np.linalg.norm(waypoints[k] - hand) < REACHED:
-            k += 1
-        move = np.clip((waypoints[k] - hand) * 100.0, -1.0, 1.0)
-        *_, info = env.step(np.append(move, -1.0).astype(np.float32))
+        k, (*_, info) = sweep_step(env, waypoints, k)
         if info["success"]:
             return t
     return None
+
+
+def sweep_step(env: TaskEnv, waypoints: list[np.ndarray], k: int) -> tuple[int, tuple]:
+    """One step of the sweep: waypoint `k` once the hand is there moves on to the next, and the
+    hand is driven toward the current one at full speed. Returns the waypoint index and what
+    `env.step` returned."""
+    hand = np.asarray(env.unwrapped.backend.features()["tcp_pos"])
+    if k < len(waypoints) - 1 and np.linalg.norm(waypoints[k] - hand) < REACHED:
+        k += 1
+    move = np.clip((waypoints[k] - hand) * 100.0, -1.0, 1.0)
+    return k, env.step(np.append(move, -1.0).astype(np.float32))
 
 
 def trial_first_find(env: TaskEnv, goal_index: int, seed: int, episodes: int, waypoints: list[np.ndarray]) -> int | None:
@@ -80,11 +87,7 @@ def trial_first_find(env: TaskEnv, goal_index: int, seed: int, episodes: int, wa
         env.reset(seed=seed, options={"goal_index": goal_index})
         done = False
         while not done:
-            hand = np.asarray(env.unwrapped.backend.features()["tcp_pos"])
-            if k < len(waypoints) - 1 and np.linalg.norm(waypoints[k] - hand) < REACHED:
-                k += 1
-            move = np.clip((waypoints[k] - hand) * 100.0, -1.0, 1.0)
-            _, _, terminated, truncated, info = env.step(np.append(move, -1.0).astype(np.float32))
+            k, (_, _, terminated, truncated, info) = sweep_step(env, waypoints, k)
             if info["success"]:
                 return episode
             done = terminated or truncated

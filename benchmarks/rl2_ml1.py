@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
-from taskforge.run import RunDir, load_checkpoint, read_jsonl, save_checkpoint  # noqa: E402
+from taskforge.run import RunDir, load_checkpoint, policy_file, read_jsonl, save_checkpoint  # noqa: E402
 from taskforge.spec import SpecError, resolve_relative  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -136,9 +136,8 @@ def evaluate_starting_point(run_dir: Path, trials: int) -> None:
     source = config["curriculum"].get("init_from")
     if source is None:
         return
-    source = resolve_relative(config["curriculum_file"], source)
     try:
-        state = load_checkpoint(RunDir(source).policy_checkpoint() if source.is_dir() else source)
+        state = load_checkpoint(policy_file(resolve_relative(config["curriculum_file"], source)))
     except SpecError:
         return
     with tempfile.TemporaryDirectory() as folder:

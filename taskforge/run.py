@@ -176,15 +176,20 @@ class LoadedRun:
         return [(TaskSpec.model_validate(p["task"]), p["task_file"], p["stages"]) for p in self.config["phases"]]
 
 
-def load_run(path: str | Path) -> LoadedRun:
-    """A run directory (its final policy, else its latest checkpoint) or a checkpoint file."""
+def policy_file(path: str | Path) -> Path:
+    """The checkpoint a run directory (its final policy, else its latest checkpoint) or a
+    checkpoint file names; a `SpecError` naming `path` when it is neither or holds no policy."""
     path = Path(path)
     if path.is_dir():
-        checkpoint = RunDir(path).policy_checkpoint()
-    elif path.is_file():
-        checkpoint = path
-    else:
-        raise SpecError.single(path, "", "no such run directory or checkpoint file")
+        return RunDir(path).policy_checkpoint()
+    if path.is_file():
+        return path
+    raise SpecError.single(path, "", "no such run directory or checkpoint file")
+
+
+def load_run(path: str | Path) -> LoadedRun:
+    """A run directory (its final policy, else its latest checkpoint) or a checkpoint file."""
+    checkpoint = policy_file(path)
     state = load_checkpoint(checkpoint)
     config = state["config"]
     try:

@@ -480,10 +480,10 @@ class PPOAgent:
         require(state, ("policy", "obs_normalizer", "privileged_normalizer", "reward_scaler"), "PPO or RL²")
         load_matching(self.policy, state["policy"], "policy")
         for name in ("obs_normalizer", "privileged_normalizer", "reward_scaler"):
-            rms = getattr(self, name).rms
-            if tuple(state[name]["mean"].shape) != tuple(rms.mean.shape):
-                raise WeightsMismatch(f"its {name} has {tuple(state[name]['mean'].shape)} statistics, this agent {tuple(rms.mean.shape)}")
-            rms.load_state_dict(state[name])
+            try:
+                getattr(self, name).rms.load_state_dict(state[name])  # checks the shape before it assigns
+            except ValueError as exc:
+                raise WeightsMismatch(f"its {name}: {exc}") from None
 
     def load_state_dict(self, state: dict) -> None:
         self.policy.load_state_dict(state["policy"])

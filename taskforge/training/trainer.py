@@ -28,7 +28,7 @@ from taskforge.agents import Agent, WeightsMismatch, make_vector_env, set_torch_
 from taskforge.curriculum import CurriculumScheduler
 from taskforge.envs import PhasedEnv, ResolvedCurriculum, load_curriculum
 from taskforge.rollouts import StageResult, evaluate_rows, summarize
-from taskforge.run import RunDir, build_agent, load_checkpoint, save_checkpoint, save_json
+from taskforge.run import RunDir, build_agent, load_checkpoint, policy_file, save_checkpoint, save_json
 from taskforge.spec import AgentSpec, SpecError, TaskSpec
 from taskforge.training.driver import CurriculumDriver, EpisodeStats
 from taskforge.training.metrics import MetricsLogger
@@ -161,7 +161,7 @@ def load_init_from(cur: ResolvedCurriculum, agent: Agent) -> None:
     `SpecError` at `init_from`, raised before anything is written (`validate` calls this too)."""
     assert cur.init_from is not None
     try:
-        source = RunDir(cur.init_from).policy_checkpoint() if cur.init_from.is_dir() else cur.init_from
+        source = policy_file(cur.init_from)
         state = load_checkpoint(source)
     except SpecError as exc:
         raise SpecError.single(cur.file, "init_from", str(exc.issues[0])) from None
