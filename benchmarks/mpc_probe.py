@@ -11,7 +11,9 @@
    the refits' layers (is it the model's capacity?).
 3. The planner: held-out success of the final model with the planner it trained with, and with
    a bigger one (200 candidates x 4 rounds x 15 steps, 20 elites: ~10x agents/mpc.yaml's search)
-   on the same goals and seeds (`--trials 0` skips it).
+   on the same goals and seeds (`--trials 0` skips it); with `--refit`, also of each refitted
+   model with the run's own planner (and its terminal value, if it has one): does a model that
+   predicts contact better make the planner push?
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
@@ -103,6 +105,7 @@ def main() -> None:
     motion = object_motion_errors(agent, agent.model, obj, everything)
     motion_table(motion)
     payload: dict = {"run": str(args.run), "step": agent.global_step, "object_motion": motion}
+    refits: dict[str, DynamicsEnsemble] = {}
     if args.refit:
         split = torch.randperm(agent.buffer.size, generator=torch.Generator().manual_seed(0))
         held_out, train = split[: len(split) // 10], split[len(split) // 10 :]
@@ -110,7 +113,7 @@ def main() -> None:
         fits = {"run's model": agent.model}
         for label, share in (("refit, uniform", 0.0), (f"refit, {args.oversample:.0%} moves >= {args.moved_mm:g} mm", args.oversample)):
             start = time.perf_counter()
-            fits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm)
+            fits[label] = refits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm)
             print(f"{label}: {args.refit} steps in {time.perf_counter() - start:.0f} s")
         payload["refit"] = {"updates": args.refit, "oversample": args.oversample, "moved_mm": args.moved_mm, "hidden": args.hidden or agent.mpc.hidden_sizes,
                             "held_out": len(held_out),
@@ -119,23 +122,29 @@ def main() -> None:
             print(f"\n{label}, held-out 10 %:")
             motion_table(rows)
     if args.trials:
-        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials)}
+        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits)}
     name = f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")
     print(f"wrote {write_result(name, payload)}")
 
 
-def compare_planners(agent, run, trials: int) -> list[dict]:
-    """Held-out success of the final model with its own planner and with `BIGGER`."""
+def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble]) -> list[dict]:
+    """Held-out success of the final model with its own planner and with `BIGGER`, and of each
+    of `refits` with the run's own planner."""
     task, task_file, stages = run.phases[-1]
+    own_model, own_planner = agent.model, agent.spec.planning
+    trials_to_run = [("run's model", own_model, "as trained", {}), ("run's model", own_model, "bigger search", BIGGER)]
+    trials_to_run += [(label, model, "as trained", {}) for label, model in refits.items()]
     rows = []
-    for label, change in (("as trained", {}), ("bigger search", BIGGER)):
-        agent.mpc = agent.spec.planning.model_copy(update=change)
+    for model_label, model, planner, change in trials_to_run:
+        agent.model, agent.mpc = model, own_planner.model_copy(update=change)
         start = time.perf_counter()
         (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
-        rows.append({"planner": label, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites"}),
+        rows.append({"model": model_label, "planner": planner, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites"}),
                      "success_rate": result.as_dict()["success_rate"], "seconds": time.perf_counter() - start})
-    print_table(["planner", "population x rounds x horizon", "held-out success", "s"],
-                [[r["planner"], f"{r['population']} x {r['iterations']} x {r['horizon']}", f"{r['success_rate']:.2f}", r["seconds"]] for r in rows])
+    agent.model, agent.mpc = own_model, own_planner
+    print_table(["model", "planner", "population x rounds x horizon", "held-out success", "s"],
+                [[r["model"], r["planner"], f"{r['population']} x {r['iterations']} x {r['horizon']}", f"{r['success_rate']:.2f}", r["seconds"]]
+                 for r in rows])
     return rows
 
 
