@@ -93,7 +93,7 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--object", default="4:7", help="the object's position in the observation, start:stop")
     parser.add_argument("--refit", type=int, default=0, help="Adam steps of the offline refits (0: skip them)")
-    parser.add_argument("--oversample", type=float, default=0.5, help="share of each refit batch from transitions that moved the object")
+    parser.add_argument("--oversample", type=float, default=0.5, help="share of each refit batch from transitions that moved the object (0: the uniform refit only)")
     parser.add_argument("--moved-mm", type=float, default=5.0, help="what counts as the object moving, for --oversample")
     parser.add_argument("--hidden", type=int, nargs="+", help="the refits' hidden layer sizes (default: the run's)")
     args = parser.parse_args()
@@ -111,7 +111,8 @@ def main() -> None:
         held_out, train = split[: len(split) // 10], split[len(split) // 10 :]
         moved = moved_mm(agent, obj)
         fits = {"run's model": agent.model}
-        for label, share in (("refit, uniform", 0.0), (f"refit, {args.oversample:.0%} moves >= {args.moved_mm:g} mm", args.oversample)):
+        shares = [("refit, uniform", 0.0)] + ([(f"refit, {args.oversample:.0%} moves >= {args.moved_mm:g} mm", args.oversample)] if args.oversample else [])
+        for label, share in shares:
             start = time.perf_counter()
             fits[label] = refits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm)
             print(f"{label}: {args.refit} steps in {time.perf_counter() - start:.0f} s")
