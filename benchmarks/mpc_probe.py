@@ -110,12 +110,12 @@ def main() -> None:
         split = torch.randperm(agent.buffer.size, generator=torch.Generator().manual_seed(0))
         held_out, train = split[: len(split) // 10], split[len(split) // 10 :]
         moved = moved_mm(agent, obj)
-        fits = {"run's model": agent.model}
         shares = [("refit, uniform", 0.0)] + ([(f"refit, {args.oversample:.0%} moves >= {args.moved_mm:g} mm", args.oversample)] if args.oversample else [])
         for label, share in shares:
             start = time.perf_counter()
-            fits[label] = refits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm)
+            refits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm)
             print(f"{label}: {args.refit} steps in {time.perf_counter() - start:.0f} s")
+        fits = {"run's model": agent.model} | refits
         payload["refit"] = {"updates": args.refit, "oversample": args.oversample, "moved_mm": args.moved_mm, "hidden": args.hidden or agent.mpc.hidden_sizes,
                             "held_out": len(held_out),
                             "errors": {label: object_motion_errors(agent, model, obj, held_out) for label, model in fits.items()}}
@@ -133,10 +133,10 @@ def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble
     of `refits` with the run's own planner."""
     task, task_file, stages = run.phases[-1]
     own_model, own_planner = agent.model, agent.spec.planning
-    trials_to_run = [("run's model", own_model, "as trained", {}), ("run's model", own_model, "bigger search", BIGGER)]
-    trials_to_run += [(label, model, "as trained", {}) for label, model in refits.items()]
+    plans = [("run's model", own_model, "as trained", {}), ("run's model", own_model, "bigger search", BIGGER)]
+    plans += [(label, model, "as trained", {}) for label, model in refits.items()]
     rows = []
-    for model_label, model, planner, change in trials_to_run:
+    for model_label, model, planner, change in plans:
         agent.model, agent.mpc = model, own_planner.model_copy(update=change)
         start = time.perf_counter()
         (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
