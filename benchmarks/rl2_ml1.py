@@ -4,7 +4,7 @@ of RL² next to a memoryless PPO baseline.
 
     python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
                                  rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
-                                 rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid
+                                 rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid rl2-reach-zone-find-deep rl2-reach-zone-find-more
                                  rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-long ppo-reach-zone-find ppo-reach-zone-plane
                                  rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold
                                  ppo-reach rl2-push ppo-push rl2-pick-place]
@@ -67,6 +67,8 @@ VARIANTS = {
     "rl2-reach-zone-find": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find.yaml",
     "rl2-reach-zone-find-calm": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find_calm.yaml",
     "rl2-reach-zone-find-mid": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find_mid.yaml",
+    "rl2-reach-zone-find-deep": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find_deep.yaml",
+    "rl2-reach-zone-find-more": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find_more.yaml",
     "rl2-reach-zone-find-short": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_find_short.yaml",
     "rl2-reach-zone-plane": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_plane.yaml",
     "rl2-reach-zone-grow": ROOT / "benchmarks/configs/ml1_reach_rl2_zone_grow.yaml",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from taskforge.envs import ResolvedCurriculum
 from taskforge.spec import AgentSpec, ConditionSpec, TaskSpec
+from taskforge.spec.curriculum import PromotionSpec
 
 
 def condition_text(c: ConditionSpec) -> str:
@@ -93,18 +94,24 @@ def agent_summary(agent: AgentSpec) -> list[str]:
          if agent.algo == "rl2" else [])
 
 
+def _promotion(rule: PromotionSpec) -> str:
+    return (
+        f"promote at success >= {rule.threshold:g} over {rule.window} episodes (min {rule.min_steps:,} steps"
+        + (f", or after {rule.max_steps:,} steps in a stage" if rule.max_steps else "")
+        + ")"
+    )
+
+
 def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     spec = cur.spec
     lines = [
         f"curriculum {spec.name}: {spec.total_steps:,} steps, seed {spec.seed}, agent {cur.agent.name} ({cur.agent_file})",
-        f"  promote at success >= {spec.promotion.threshold:g} over {spec.promotion.window} episodes "
-        f"(min {spec.promotion.min_steps:,} steps"
-        + (f", or after {spec.promotion.max_steps:,} steps in a stage" if spec.promotion.max_steps else "")
-        + f"); replay {spec.replay.fraction:g}; "
+        f"  {_promotion(spec.promotion)}; replay {spec.replay.fraction:g}; "
         f"demotion {'on' if spec.demotion.enabled else 'off'}; sub-task sampling {spec.sampling.mode}",
     ]
-    for i, phase in enumerate(cur.phases):
-        lines.append(f"  phase {i + 1}: {phase.task.name} ({phase.task_file}): {' -> '.join(phase.stages)}")
+    for i, (phase, phase_spec) in enumerate(zip(cur.phases, spec.phases)):
+        own_rule = f"; this phase: {_promotion(phase_spec.promotion)}" if phase_spec.promotion else ""
+        lines.append(f"  phase {i + 1}: {phase.task.name} ({phase.task_file}): {' -> '.join(phase.stages)}{own_rule}")
     lines.append(
         f"  evaluate every {spec.evaluation.every_steps:,} steps on {spec.evaluation.episodes} "
         f"{spec.evaluation.split} {'trials' if cur.agent.algo == 'rl2' else 'episodes'}"

@@ -29,6 +29,8 @@ MEMORYLESS_BASELINES = {
 CONTINUE_A_RUN = {
     "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-plane-seed0",
     "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane_long.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-plane-seed0",
+    "benchmarks/configs/ml1_reach_rl2_zone_find_deep.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-find-mid-seed0",
+    "benchmarks/configs/ml1_reach_rl2_zone_find_more.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-find-mid-seed0",
 }
 """Curricula whose `init_from` names a benchmark run that a fresh clone does not hold (final
 policies are not committed): until that run exists, `validate` must refuse them in one line."""

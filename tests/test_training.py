@@ -364,6 +364,17 @@ def test_resume_before_the_first_checkpoint_starts_afresh(tmp_path, capsys):
     assert steps == [200, 400] and not any("stale" in m for m in read_jsonl(run / "metrics.jsonl"))
 
 
+def test_validate_names_a_phases_own_promotion_rule(tmp_path, capsys):
+    # a phase's `promotion` replaces the curriculum-wide rule for it (no `max_steps` here, so
+    # this phase never moves on by time): the summary must say so, not show only the global rule
+    own = {"threshold": 1.0, "window": 50}
+    cur = write_curriculum(tmp_path, phases=[{"task": "task.yaml", "promotion": own}, {"task": "task.yaml"}])
+    assert main(["validate", str(cur)]) == 0
+    phases = [line for line in capsys.readouterr().out.splitlines() if line.strip().startswith("phase ")]
+    assert phases[0].endswith("; this phase: promote at success >= 1 over 50 episodes (min 0 steps)")
+    assert "this phase" not in phases[1]
+
+
 def test_resume_with_other_curriculum_is_refused(tmp_path, capsys):
     cur = write_curriculum(tmp_path, total_steps=200)
     train(cur, run_dir=tmp_path / "run", progress=False)

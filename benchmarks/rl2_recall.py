@@ -1,0 +1,212 @@
+"""Where does an RL² policy's hand go in the episodes after its first? A probe of why a trial's
+later episodes gain less than a remembered find should give them.
+
+    python benchmarks/rl2_recall.py RUN_DIR [--trials 50] [--split test] [--trial-episodes K] [--sampled]
+
+Why: on ML1's whole reach box (goal hidden, an episode ends at its find) rl2-reach-zone-find-mid
+at 10M finds the goal in episode 1 on ~0.58 of held-out trials, yet after a first-episode *hit*
+the later episodes find it again only ~0.84 of the time. A policy that remembered where its
+first episode ended would go straight back (that point is inside the 5 cm ball). So each later
+episode's closest approach to the goal and to episode 1's end point tells which of two
+failures it is: a *close miss* (the hand comes back to within a few cm of the remembered point
+but not inside the ball: the memory is there and imprecise) or a *wander* (the hand never comes
+near it: the memory is lost, or the policy searches again). After a first-episode *miss* the
+same numbers say how far the later searches get.
+
+Plays the run's evaluation stage (`curriculum.evaluation.stage`) on `--trials` trials, trial n
+on goal n of the split and seeded n, as `taskforge eval` does, one env, with the policy's mean
+(or `--sampled`). Writes benchmarks/results/rl2_recall_<run>[_sampled].json, <run> the run
+directory's name (a checkpoint file's folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks.common import print_table, write_result  # noqa: E402
+from taskforge.agents.rl2 import RL2Trial  # noqa: E402
+from taskforge.envs import TaskEnv  # noqa: E402
+from taskforge.run import load_run  # noqa: E402
+
+CLOSE = 0.03
+"""A later episode after a hit whose closest approach to episode 1's end point is within this
+many metres came back to it: the ball is 5 cm, so such an episode missed by imprecision."""
+
+
+class HandTrace(gymnasium.Wrapper):
+    """Keeps the hand's (tcp) path of every episode of the wrapped task env, with its goal, so
+    the episode ends that `RL2Trial` resets inside its step are kept. `episodes` is the caller's
+    to clear at a trial's start."""
+
+    def __init__(self, env: gymnasium.Env) -> None:
+        super().__init__(env)
+        self.episodes: list[dict[str, Any]] = []
+        self._path: list[np.ndarray] = []
+
+    def reset(self, **kwargs: Any):
+        out = self.env.reset(**kwargs)
+        self._path = [self._tcp()]
+        return out
+
+    def step(self, action: np.ndarray):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self._path.append(self._tcp())
+        if terminated or truncated:
+            path = np.array(self._path)
+            goal = np.array(self.env.unwrapped.backend.features()["goal_pos"])
+            self.episodes.append(
+                {
+                    "success": bool(info["episode_success"]),
+                    "path": path,
+                    "goal": goal,
+                    "min_goal": float(np.linalg.norm(path - goal, axis=1).min()),
+                }
+            )
+        return obs, reward, terminated, truncated, info
+
+    def _tcp(self) -> np.ndarray:
+        return np.array(self.env.unwrapped.backend.features()["tcp_pos"])
+
+
+def play_trial(run, env: RL2Trial, trace: HandTrace, stage: str, goal_index: int, seed: int, deterministic: bool) -> list[dict[str, Any]]:
+    """One trial, as `taskforge eval` plays it; its episodes as `HandTrace` recorded them."""
+    trace.episodes = []
+    obs, _ = env.reset(seed=seed, options={"stage": stage, "goal_index": goal_index})
+    state = run.agent.initial_state(1)
+    start = np.ones(1, dtype=bool)
+    trial_over = False
+    while not trial_over:
+        actions, state = run.agent.act(obs[None], state, start, deterministic=deterministic)
+        start[:] = False
+        obs, _, trial_over, _, _ = env.step(actions[0])
+    return trace.episodes
+
+
+def later_episodes(trials: list[list[dict[str, Any]]], first_hit: bool) -> dict[str, Any]:
+    """Episodes 2..K of the trials whose first episode hit (`first_hit`) or missed: how many
+    found the goal, and of the misses how close they came to the goal and, after a hit, to
+    episode 1's end point (the remembered find)."""
+    rows = []
+    for episodes in trials:
+        if episodes[0]["success"] != first_hit:
+            continue
+        find, seen = episodes[0]["path"][-1], episodes[0]["path"][-2]
+        for e in episodes[1:]:
+            rows.append(
+                (
+                    e["success"],
+                    e["min_goal"],
+                    float(np.linalg.norm(e["path"] - find, axis=1).min()),
+                    float(np.linalg.norm(e["path"] - seen, axis=1).min()),
+                )
+            )
+    misses = [r for r in rows if not r[0]]
+    out: dict[str, Any] = {"episodes": len(rows), "found": sum(r[0] for r in rows), "missed": len(misses)}
+    if misses:
+        out["miss_closest_to_goal_m"] = spread([r[1] for r in misses])
+        if first_hit:
+            out["miss_closest_to_find_m"] = spread([r[2] for r in misses])
+            out["miss_closest_to_seen_m"] = spread([r[3] for r in misses])
+            out["close_misses"] = sum(r[2] < CLOSE for r in misses)
+    return out
+
+
+def spread(values: list[float]) -> dict[str, Any]:
+    return {"median": float(np.median(values)), "quartiles": np.percentile(values, [25, 75]).tolist()}
+
+
+def shown(d: dict[str, Any] | None) -> str:
+    return f"{d['median']:.3f} [{d['quartiles'][0]:.3f}, {d['quartiles'][1]:.3f}]" if d else "-"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("--trials", type=int, default=50)
+    parser.add_argument("--split", choices=["train", "test"], default="test")
+    parser.add_argument("--trial-episodes", type=int, default=None, help="default: the agent's K")
+    parser.add_argument("--sampled", action="store_true", help="sample actions instead of the mean")
+    args = parser.parse_args()
+
+    run = load_run(args.run_dir)
+    task, task_file, stages = run.phases[0]
+    stage = run.config["curriculum"]["evaluation"]["stage"] or stages[0]
+    k = args.trial_episodes or run.agent.spec.trial_episodes
+    trace = HandTrace(TaskEnv(task, task_file, stage=stage, split=args.split, privileged=run.agent.privileged_dim > 0))
+    env = RL2Trial(
+        trace, k, augment=run.agent.spec.algo == "rl2", reward_scale=run.agent.spec.rl2.reward_input_scale if run.agent.spec.rl2 else 1.0
+    )
+    num_goals = trace.unwrapped.backend.num_goals(args.split)
+    run.agent.generator.manual_seed(0)
+    trials = [play_trial(run, env, trace, stage, n % num_goals, n, not args.sampled) for n in range(args.trials)]
+    env.close()
+
+    per_episode = np.array([[e["success"] for e in t] for t in trials]).mean(axis=0)
+    first_misses = [t[0]["min_goal"] for t in trials if not t[0]["success"]]
+    hits = [t[0] for t in trials if t[0]["success"]]
+    end, seen = ([float(np.linalg.norm(e["path"][i] - e["goal"])) for e in hits] for i in (-1, -2))
+    summary = {
+        "after_hit": later_episodes(trials, True),
+        "after_miss": later_episodes(trials, False),
+        "first_miss_closest_to_goal_m": spread(first_misses) if first_misses else None,
+        "first_hit_end_to_goal_m": spread(end) if hits else None,
+        "first_hit_seen_to_goal_m": spread(seen) if hits else None,
+    }
+    print(f"{args.run_dir} ({run.agent.global_step:,} steps), {args.split} split, {args.trials} trials of {k}, stage {stage}")
+    print("success per episode: " + " ".join(f"{p:.2f}" for p in per_episode))
+    print(
+        f"episode 1's hits ({len(hits)}): end point to goal {shown(summary['first_hit_end_to_goal_m'])} m, "
+        f"last point the policy saw to goal {shown(summary['first_hit_seen_to_goal_m'])} m"
+    )
+    print(f"episode 1's misses ({len(first_misses)}): closest to goal {shown(summary['first_miss_closest_to_goal_m'])} m")
+    headers = [
+        "first episode",
+        "later episodes",
+        "found",
+        "missed",
+        "miss: closest to goal (m, median [IQR])",
+        "miss: closest to episode 1's end",
+        "... to its last point seen",
+        f"came back within {CLOSE * 100:.0f} cm",
+    ]
+    print_table(
+        headers,
+        [
+            [
+                name,
+                s["episodes"],
+                s["found"],
+                s["missed"],
+                shown(s.get("miss_closest_to_goal_m")),
+                shown(s.get("miss_closest_to_find_m")),
+                shown(s.get("miss_closest_to_seen_m")),
+                s.get("close_misses", "-"),
+            ]
+            for name, s in (("hit", summary["after_hit"]), ("miss", summary["after_miss"]))
+        ],
+    )
+    run_name = (args.run_dir if args.run_dir.is_dir() else args.run_dir.parent).name
+    payload = {
+        "run": str(args.run_dir),
+        "step": run.agent.global_step,
+        "split": args.split,
+        "trials": args.trials,
+        "trial_episodes": k,
+        "stage": stage,
+        "actions": "sampled" if args.sampled else "mean",
+        "per_episode": per_episode.tolist(),
+        **summary,
+    }
+    print(f"wrote {write_result(f'rl2_recall_{run_name}' + ('_sampled' if args.sampled else ''), payload)}")
+
+
+if __name__ == "__main__":
+    main()
