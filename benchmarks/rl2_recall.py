@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import print_table, write_result  # noqa: E402
 from taskforge.agents.rl2 import RL2Trial  # noqa: E402
 from taskforge.envs import TaskEnv  # noqa: E402
-from taskforge.run import load_run  # noqa: E402
+from taskforge.run import LoadedRun, load_run  # noqa: E402
 
 CLOSE = 0.03
 """A later episode after a hit whose closest approach to episode 1's end point is within this
@@ -76,18 +76,35 @@ class HandTrace(gymnasium.Wrapper):
         return np.array(self.env.unwrapped.backend.features()["tcp_pos"])
 
 
-def play_trial(run, env: RL2Trial, trace: HandTrace, stage: str, goal_index: int, seed: int, deterministic: bool) -> list[dict[str, Any]]:
-    """One trial, as `taskforge eval` plays it; its episodes as `HandTrace` recorded them."""
-    trace.episodes = []
-    obs, _ = env.reset(seed=seed, options={"stage": stage, "goal_index": goal_index})
-    state = run.agent.initial_state(1)
-    start = np.ones(1, dtype=bool)
-    trial_over = False
-    while not trial_over:
-        actions, state = run.agent.act(obs[None], state, start, deterministic=deterministic)
-        start[:] = False
-        obs, _, trial_over, _, _ = env.step(actions[0])
-    return trace.episodes
+def play(
+    path: str | Path, trials: int = 50, split: str = "test", trial_episodes: int | None = None, sampled: bool = False
+) -> tuple[LoadedRun, str, list[list[dict[str, Any]]]]:
+    """The run (a run directory or checkpoint), its evaluation stage and `trials` trials of it
+    as `HandTrace` recorded them: trial n on goal n of the split, seeded n, as `taskforge eval`
+    plays them, in one env."""
+    run = load_run(path)
+    stage = run.config["curriculum"]["evaluation"]["stage"] or run.phases[0][2][0]
+    task, task_file, _ = next(p for p in run.phases if stage in p[2])
+    agent = run.agent
+    k = trial_episodes or agent.spec.trial_episodes
+    trace = HandTrace(TaskEnv(task, task_file, stage=stage, split=split, privileged=agent.privileged_dim > 0))
+    env = RL2Trial(trace, k, augment=agent.spec.algo == "rl2", reward_scale=agent.spec.rl2.reward_input_scale if agent.spec.rl2 else 1.0)
+    num_goals = trace.unwrapped.backend.num_goals(split)
+    agent.generator.manual_seed(0)
+    played = []
+    try:
+        for n in range(trials):
+            trace.episodes = []
+            obs, _ = env.reset(seed=n, options={"stage": stage, "goal_index": n % num_goals})
+            state, start, trial_over = agent.initial_state(1), np.ones(1, dtype=bool), False
+            while not trial_over:
+                actions, state = agent.act(obs[None], state, start, deterministic=not sampled)
+                start[:] = False
+                obs, _, trial_over, _, _ = env.step(actions[0])
+            played.append(trace.episodes)
+    finally:
+        env.close()
+    return run, stage, played
 
 
 def later_episodes(trials: list[list[dict[str, Any]]], first_hit: bool) -> dict[str, Any]:
@@ -119,6 +136,25 @@ def later_episodes(trials: list[list[dict[str, Any]]], first_hit: bool) -> dict[
     return out
 
 
+def summarize(trials: list[list[dict[str, Any]]]) -> dict[str, Any]:
+    """Success per episode, the later episodes after a first-episode hit and after a miss
+    (`later_episodes`), and where episode 1 ended: its misses' closest approach to the goal, its
+    finds' end point and the last point before it (the last the policy saw) to the goal."""
+    first_misses = [t[0]["min_goal"] for t in trials if not t[0]["success"]]
+    hits = [t[0] for t in trials if t[0]["success"]]
+    end, seen = ([float(np.linalg.norm(e["path"][i] - e["goal"])) for e in hits] for i in (-1, -2))
+    return {
+        "per_episode": np.array([[e["success"] for e in t] for t in trials]).mean(axis=0).tolist(),
+        "first_hits": len(hits),
+        "first_misses": len(first_misses),
+        "after_hit": later_episodes(trials, True),
+        "after_miss": later_episodes(trials, False),
+        "first_miss_closest_to_goal_m": spread(first_misses) if first_misses else None,
+        "first_hit_end_to_goal_m": spread(end) if hits else None,
+        "first_hit_seen_to_goal_m": spread(seen) if hits else None,
+    }
+
+
 def spread(values: list[float]) -> dict[str, Any]:
     return {"median": float(np.median(values)), "quartiles": np.percentile(values, [25, 75]).tolist()}
 
@@ -136,37 +172,16 @@ def main() -> None:
     parser.add_argument("--sampled", action="store_true", help="sample actions instead of the mean")
     args = parser.parse_args()
 
-    run = load_run(args.run_dir)
-    task, task_file, stages = run.phases[0]
-    stage = run.config["curriculum"]["evaluation"]["stage"] or stages[0]
-    k = args.trial_episodes or run.agent.spec.trial_episodes
-    trace = HandTrace(TaskEnv(task, task_file, stage=stage, split=args.split, privileged=run.agent.privileged_dim > 0))
-    env = RL2Trial(
-        trace, k, augment=run.agent.spec.algo == "rl2", reward_scale=run.agent.spec.rl2.reward_input_scale if run.agent.spec.rl2 else 1.0
-    )
-    num_goals = trace.unwrapped.backend.num_goals(args.split)
-    run.agent.generator.manual_seed(0)
-    trials = [play_trial(run, env, trace, stage, n % num_goals, n, not args.sampled) for n in range(args.trials)]
-    env.close()
-
-    per_episode = np.array([[e["success"] for e in t] for t in trials]).mean(axis=0)
-    first_misses = [t[0]["min_goal"] for t in trials if not t[0]["success"]]
-    hits = [t[0] for t in trials if t[0]["success"]]
-    end, seen = ([float(np.linalg.norm(e["path"][i] - e["goal"])) for e in hits] for i in (-1, -2))
-    summary = {
-        "after_hit": later_episodes(trials, True),
-        "after_miss": later_episodes(trials, False),
-        "first_miss_closest_to_goal_m": spread(first_misses) if first_misses else None,
-        "first_hit_end_to_goal_m": spread(end) if hits else None,
-        "first_hit_seen_to_goal_m": spread(seen) if hits else None,
-    }
+    run, stage, trials = play(args.run_dir, args.trials, args.split, args.trial_episodes, args.sampled)
+    k = len(trials[0])
+    summary = summarize(trials)
     print(f"{args.run_dir} ({run.agent.global_step:,} steps), {args.split} split, {args.trials} trials of {k}, stage {stage}")
-    print("success per episode: " + " ".join(f"{p:.2f}" for p in per_episode))
+    print("success per episode: " + " ".join(f"{p:.2f}" for p in summary["per_episode"]))
     print(
-        f"episode 1's hits ({len(hits)}): end point to goal {shown(summary['first_hit_end_to_goal_m'])} m, "
+        f"episode 1's hits ({summary['first_hits']}): end point to goal {shown(summary['first_hit_end_to_goal_m'])} m, "
         f"last point the policy saw to goal {shown(summary['first_hit_seen_to_goal_m'])} m"
     )
-    print(f"episode 1's misses ({len(first_misses)}): closest to goal {shown(summary['first_miss_closest_to_goal_m'])} m")
+    print(f"episode 1's misses ({summary['first_misses']}): closest to goal {shown(summary['first_miss_closest_to_goal_m'])} m")
     headers = [
         "first episode",
         "later episodes",
@@ -202,7 +217,6 @@ def main() -> None:
         "trial_episodes": k,
         "stage": stage,
         "actions": "sampled" if args.sampled else "mean",
-        "per_episode": per_episode.tolist(),
         **summary,
     }
     print(f"wrote {write_result(f'rl2_recall_{run_name}' + ('_sampled' if args.sampled else ''), payload)}")

@@ -15,10 +15,11 @@ import yaml
 from gymnasium.spaces import Box
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
+from benchmarks.rl2_recall import play, summarize
 from taskforge.agents import PPOAgent, RL2Trial, agent_observation_space
 from taskforge.cli import main
 from taskforge.envs import TaskEnv, load_task
-from taskforge.rollouts import StageResult
+from taskforge.rollouts import StageResult, evaluate
 from taskforge.spec import AgentSpec
 from taskforge.training import train
 from tests.conftest import ROOT
@@ -219,6 +220,21 @@ def test_rl2_infers_the_goal_from_reward_and_beats_a_memoryless_policy():
     assert adapted[1:].mean() > baseline[1:].mean() + 0.5, (adapted, baseline)
 
 
+def train_small_testbed(folder: Path, total_steps: int, goal_radius: float = 0.5) -> Path:
+    """The shipped testbed made small by overrides alone (see the test below); its run directory."""
+    (folder / "task.yaml").write_text(yaml.safe_dump({
+        "base": str(ROOT / "tasks/point_mass/semicircle.yaml"), "max_episode_steps": 8,
+        "backend": {"type": "point_mass", "goal_radius": goal_radius, "goal_arc": [0.0, 180.0], "max_step": 0.1}}))
+    (folder / "agent.yaml").write_text(yaml.safe_dump({
+        "base": str(ROOT / "agents/rl2_testbed.yaml"), "name": "rl2-testbed-small", "rl2": {"trial_episodes": 3},
+        "ppo": {"num_envs": 16, "rollout_steps": 48, "bptt_length": 24}}))
+    (folder / "curriculum.yaml").write_text(yaml.safe_dump({
+        "base": str(ROOT / "curricula/point_semicircle_rl2.yaml"), "agent": "agent.yaml", "total_steps": total_steps,
+        "phases": [{"task": "task.yaml"}], "evaluation": {"every_steps": total_steps, "episodes": 50, "split": "test"},
+        "checkpoint": {"every_steps": total_steps}}))
+    return train(folder / "curriculum.yaml", run_dir=folder / "run", progress=False)
+
+
 def test_rl2_adapts_on_a_small_version_of_the_shipped_testbed(tmp_path, capsys):
     """The regression test of RL² (issue 21): the shipped testbed (tasks/point_mass/semicircle.yaml,
     agents/rl2_testbed.yaml, curricula/point_semicircle_rl2.yaml) made small enough for the suite
@@ -229,17 +245,7 @@ def test_rl2_adapts_on_a_small_version_of_the_shipped_testbed(tmp_path, capsys):
     miss); seed 1 at 150k 0.64 -> 0.84, 0.56 after a miss. A memoryless policy
     repeats its one sweep: flat, and 0 after a miss. A broken trial wrapper, reward input or
     recurrent state across episodes shows up as a flat curve here."""
-    (tmp_path / "task.yaml").write_text(yaml.safe_dump({
-        "base": str(ROOT / "tasks/point_mass/semicircle.yaml"), "max_episode_steps": 8,
-        "backend": {"type": "point_mass", "goal_radius": 0.5, "goal_arc": [0.0, 180.0], "max_step": 0.1}}))
-    (tmp_path / "agent.yaml").write_text(yaml.safe_dump({
-        "base": str(ROOT / "agents/rl2_testbed.yaml"), "name": "rl2-testbed-small", "rl2": {"trial_episodes": 3},
-        "ppo": {"num_envs": 16, "rollout_steps": 48, "bptt_length": 24}}))
-    (tmp_path / "curriculum.yaml").write_text(yaml.safe_dump({
-        "base": str(ROOT / "curricula/point_semicircle_rl2.yaml"), "agent": "agent.yaml", "total_steps": 150_000,
-        "phases": [{"task": "task.yaml"}], "evaluation": {"every_steps": 150_000, "episodes": 50, "split": "test"},
-        "checkpoint": {"every_steps": 150_000}}))
-    run = train(tmp_path / "curriculum.yaml", run_dir=tmp_path / "run", progress=False)
+    run = train_small_testbed(tmp_path, 150_000)
     out = tmp_path / "meta_test.json"
     assert main(["eval", str(run), "--episodes", "50", "--out", str(out)]) == 0
     (row,) = json.loads(out.read_text())["rows"]
@@ -247,6 +253,34 @@ def test_rl2_adapts_on_a_small_version_of_the_shipped_testbed(tmp_path, capsys):
     after_miss = row["after_first_episode"]["miss"]
     assert curve[-1] >= curve[0] + 0.2, curve
     assert after_miss["trials"] >= 10 and after_miss["success_rate"] >= 0.35, after_miss
+
+
+def test_recall_probe_replays_the_meta_test_trials_and_keeps_every_episodes_path(tmp_path):
+    # benchmarks/rl2_recall.py: its trials must be the meta-test's (same goals, seeds and
+    # actions as `evaluate` plays them in one env) and its paths whole, the step that ends an
+    # episode inside RL2Trial's own step included: on this task (success: within 0.2 m of the
+    # goal on any step; episodes never end early) an episode succeeded iff its path came within 0.2 m.
+    # Goals 0.3 m from the start and sampled actions (the mean of an untrained policy barely
+    # moves), so the policy both finds and misses; the same seed draws the same actions in both
+    run = train_small_testbed(tmp_path, 800, goal_radius=0.3)
+    loaded, stage, played = play(run, trials=12, sampled=True)
+    task, task_file, _ = loaded.phases[0]
+    meta_test = evaluate(loaded.agent, task, task_file, stage, "test", 12, parallel=1, deterministic=False)
+    assert [[e["success"] for e in t] for t in played] == meta_test.successes
+    assert [[len(e["path"]) - 1 for e in t] for t in played] == meta_test.lengths == [[8, 8, 8]] * 12
+    assert all(e["success"] == (e["min_goal"] < 0.2) for t in played for e in t)
+    assert all(np.linalg.norm(e["goal"][:2]) == pytest.approx(0.3) for t in played for e in t)  # on the semicircle
+
+    summary = summarize(played)
+    hits = sum(t[0]["success"] for t in played)
+    assert 0 < hits < 12  # both sides below are exercised
+    assert (summary["first_hits"], summary["first_misses"]) == (hits, 12 - hits)
+    assert summary["after_hit"]["episodes"] == 2 * hits and summary["after_miss"]["episodes"] == 2 * (12 - hits)
+    for side in ("after_hit", "after_miss"):
+        assert summary[side]["found"] + summary[side]["missed"] == summary[side]["episodes"]
+        if summary[side]["missed"]:
+            assert summary[side]["miss_closest_to_goal_m"]["median"] >= 0.2
+    assert summary["per_episode"] == pytest.approx(np.mean(meta_test.successes, axis=0).tolist())
 
 
 # ------------------------------------------------------------------------------------ meta-test
