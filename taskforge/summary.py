@@ -95,6 +95,7 @@ def agent_summary(agent: AgentSpec) -> list[str]:
 
 
 def _promotion(rule: PromotionSpec) -> str:
+    """A promotion rule in words: the curriculum's, and a phase's own, which replaces it whole."""
     return (
         f"promote at success >= {rule.threshold:g} over {rule.window} episodes (min {rule.min_steps:,} steps"
         + (f", or after {rule.max_steps:,} steps in a stage" if rule.max_steps else "")
