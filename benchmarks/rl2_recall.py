@@ -32,8 +32,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
-from taskforge.agents.rl2 import RL2Trial  # noqa: E402
 from taskforge.envs import TaskEnv  # noqa: E402
+from taskforge.rollouts import trial_env  # noqa: E402
 from taskforge.run import LoadedRun, load_run  # noqa: E402
 
 CLOSE = 0.03
@@ -88,7 +88,7 @@ def play(
     agent = run.agent
     k = trial_episodes or agent.spec.trial_episodes
     trace = HandTrace(TaskEnv(task, task_file, stage=stage, split=split, privileged=agent.privileged_dim > 0))
-    env = RL2Trial(trace, k, augment=agent.spec.algo == "rl2", reward_scale=agent.spec.rl2.reward_input_scale if agent.spec.rl2 else 1.0)
+    env = trial_env(agent, trace, k)
     num_goals = trace.unwrapped.backend.num_goals(split)
     agent.generator.manual_seed(0)
     played = []

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import gymnasium
 import numpy as np
 
 from taskforge.agents import Agent, RL2Trial
@@ -182,21 +183,23 @@ def evaluate_rows(
     if not rows:
         raise ValueError("nothing to evaluate: no (stage, sub-task) rows")
     k = trial_episodes or agent.spec.trial_episodes
-    rl2 = agent.spec.algo == "rl2"
-    privileged = agent.privileged_dim > 0
-    envs = [
-        RL2Trial(
-            TaskEnv(task, task_file, stage=rows[0][0], split=split, privileged=privileged, end_on_success=stop_on_success),
-            k, augment=rl2, reward_scale=agent.spec.rl2.reward_input_scale if agent.spec.rl2 else 1.0,
-        )
-        for _ in range(min(parallel, trials))
-    ]
+    envs = [trial_env(agent, TaskEnv(task, task_file, stage=rows[0][0], split=split, privileged=agent.privileged_dim > 0,
+                                     end_on_success=stop_on_success), k)
+            for _ in range(min(parallel, trials))]
     try:
         return [_trials(agent, envs, task.name, stage, sub_task, split, trials, k, seed, deterministic)
                 for stage, sub_task in rows]
     finally:
         for env in envs:
             env.close()
+
+
+def trial_env(agent: Agent, env: gymnasium.Env, trial_episodes: int) -> RL2Trial:
+    """`env` (a `TaskEnv`, or a wrapper of one) played in trials of `trial_episodes` episodes as
+    the meta-test plays them for `agent`: with RL²'s inputs (previous action, scaled reward,
+    episode start) for an RL² agent, the observation unchanged for a memoryless one."""
+    scale = agent.spec.rl2.reward_input_scale if agent.spec.rl2 else 1.0
+    return RL2Trial(env, trial_episodes, augment=agent.spec.algo == "rl2", reward_scale=scale)
 
 
 def _trials(
