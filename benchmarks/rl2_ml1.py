@@ -154,26 +154,34 @@ def evaluate_starting_point(run_dir: Path, trials: int) -> None:
 SPLITS = ("train", "test", "train_sampled", "test_sampled")  # mean-action and sampled-action evaluations
 
 
-def evaluation_points(seeds: list[dict]) -> list[dict]:
-    """The k-th evaluation of every seed of one variant, for k = 0, 1, ...
+SAME_POINT = 0.1  # evaluations of sibling seeds within 10 % (+ 20k steps) of each other count as one point
 
-    Why by index and not by step: chunks end on a rollout boundary, and a run paused off the
-    500k grid (seed 2 of rl2-reach stopped at 585,600 once) evaluates a rollout or more away from
-    its siblings, so their exact step counts differ. Each point has the seeds' `steps` and, per
-    key of SPLITS, the success per episode of the trial of each seed that has it (sampled-action
-    evaluations came later and exist only at some points)."""
-    per_seed = []
-    for run in seeds:
+
+def evaluation_points(seeds: list[dict]) -> list[dict]:
+    """The evaluations of every seed of one variant, grouped into points of (about) the same step.
+
+    Why not exact steps: chunks end on a rollout boundary, so siblings evaluate a rollout or
+    more apart (9.03M and 9.07M at the "9M" chunk). Why not the k-th evaluation of each seed (the
+    rule until the eleventh session): a seed run to 1M and one run to 2M in one chunk were
+    paired, 1M with 2M. A point opens at the lowest step not yet grouped and takes each seed's
+    evaluation up to SAME_POINT beyond it, one per seed; a seed paused off the grid (585,600 next
+    to 500,000) makes its own point, and the table's seed count shows it. Each point has the
+    seeds' `steps` and, per key of SPLITS, the success per episode of the trial of each seed that
+    has it (sampled-action evaluations came later and exist only at some points)."""
+    found = []
+    for index, run in enumerate(seeds):
         by_step: dict[int, dict[str, list[float]]] = {}
         for e in run["evals"]:
             by_step.setdefault(e["step"], {})[e["split"] + ("_sampled" if e.get("sampled") else "")] = e["per_episode"]
-        per_seed.append([(step, evals) for step, evals in sorted(by_step.items()) if {"train", "test"} <= evals.keys()])
-    points = []
-    for k in range(max((len(p) for p in per_seed), default=0)):
-        reached = [p[k] for p in per_seed if len(p) > k]
-        points.append({"steps": [step for step, _ in reached],
-                       **{key: [evals[key] for _, evals in reached if key in evals] for key in SPLITS}})
-    return points
+        found += [(step, index, evals) for step, evals in by_step.items() if {"train", "test"} <= evals.keys()]
+    groups: list[list[tuple[int, int, dict]]] = []
+    for step, index, evals in sorted(found, key=lambda f: (f[0], f[1])):
+        group = groups[-1] if groups else None
+        if group is None or step > group[0][0] * (1 + SAME_POINT) + 20_000 or any(i == index for _, i, _ in group):
+            groups.append([])
+        groups[-1].append((step, index, evals))
+    return [{"steps": [step for step, _, _ in group],
+             **{key: [evals[key] for _, _, evals in group if key in evals] for key in SPLITS}} for group in groups]
 
 
 def episode_ends(curves: list[list[float]], count_seeds: bool) -> str:
