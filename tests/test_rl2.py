@@ -420,3 +420,22 @@ def test_validate_warns_of_bptt_chunks_that_never_cross_an_episode_start(tmp_pat
     assert main(["validate", str(tmp_path / "cur.yaml")]) == 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "ppo.bptt_length 50 divides the episode length of stage reach" in err[0], err
+
+
+def _seed(*steps: int) -> dict:
+    """One seed's run as rl2_ml1's report holds it: a mean-action train and test evaluation at each step."""
+    return {"evals": [{"step": s, "split": split, "per_episode": [s / 1e7] * 5} for s in steps for split in ("train", "test")]}
+
+
+def test_the_ml1_report_groups_sibling_seeds_evaluations_by_step_not_by_index():
+    from benchmarks.rl2_ml1 import evaluation_points
+
+    # a seed evaluated at 1M and 2M beside one evaluated only at its end: 2M goes with 2M
+    points = evaluation_points([_seed(1_008_000, 2_006_400), _seed(2_006_400)])
+    assert [p["steps"] for p in points] == [[1_008_000], [2_006_400, 2_006_400]]
+    assert points[1]["test"] == [[0.20064] * 5] * 2 and points[1]["test_sampled"] == []
+    # chunks ending a rollout apart are one point; a seed paused off the grid makes its own
+    points = evaluation_points([_seed(9_031_680, 10_000_000), _seed(9_072_640, 10_000_000), _seed(585_600)])
+    assert [p["steps"] for p in points] == [[585_600], [9_031_680, 9_072_640], [10_000_000, 10_000_000]]
+    # one seed's own evaluations never merge, however close
+    assert [p["steps"] for p in evaluation_points([_seed(0, 10_000)])] == [[0], [10_000]]
