@@ -254,8 +254,11 @@ def main() -> None:
             if not run.metrics.exists():
                 continue
             metrics = run.read_metrics()
+            # a run's own length (what --steps was when it started), so a report made with other
+            # --steps, or with none (2M), still says what is left of the 10M runs
+            total = json.loads(run.config.read_text())["total_steps"] if run.config.exists() else args.steps
             runs[f"{variant}-seed{seed}"] = {
-                "variant": variant, "seed": seed, "steps_done": run.steps_done(),
+                "variant": variant, "seed": seed, "steps_done": run.steps_done(), "total_steps": total,
                 "evals": [e for e in read_jsonl(run_dir / "meta_evals.jsonl") if e["trials"] == args.trials],
                 "train_last_episode_success": [(m["step"], m["success_rate"]) for m in metrics if m.get("success_rate") is not None],
                 "steps_per_s": float(np.median([m["steps_per_s"] for m in metrics if "steps_per_s" in m])),  # not in an evaluation-only record (step 0 of an init_from run)
@@ -271,7 +274,7 @@ def main() -> None:
     print_table(["variant", "env steps", "seeds", f"meta-train {episodes}", f"meta-test {episodes}",
                  f"sampled: meta-train {episodes} (seeds)", f"sampled: meta-test {episodes} (seeds)"], rows)
     missing = len(args.variants) * len(args.seeds) - len(runs)
-    remaining = sum(max(0, args.steps - r["steps_done"]) for r in runs.values()) + missing * args.steps
+    remaining = sum(max(0, r["total_steps"] - r["steps_done"]) for r in runs.values()) + missing * args.steps
     print(f"remaining: {remaining:,} env steps ({len(runs)} runs started, {missing} not started)")
     print(f"curves: {plot_curves(runs, RESULTS / 'rl2_ml1.png')}")
     write_result("rl2_ml1", {"variants": args.variants, "seeds": args.seeds, "steps": args.steps, "trials": args.trials,
