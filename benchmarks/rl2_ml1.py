@@ -44,7 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import RESULTS, advance_run, chunked_parser, print_table, pyplot, save_figure, write_result  # noqa: E402
 from taskforge.evaluation.report import evaluate_run  # noqa: E402
 from taskforge.run import RunDir, load_checkpoint, policy_file, read_jsonl, save_checkpoint  # noqa: E402
-from taskforge.spec import SpecError, resolve_relative  # noqa: E402
+from taskforge.spec import SpecError, init_for_seed, resolve_relative  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 VARIANTS = {
@@ -141,7 +141,7 @@ def evaluate_starting_point(run_dir: Path, trials: int) -> None:
     if source is None:
         return
     try:
-        state = load_checkpoint(policy_file(resolve_relative(config["curriculum_file"], source)))
+        state = load_checkpoint(policy_file(resolve_relative(config["curriculum_file"], init_for_seed(source, config["seed"]))))
     except SpecError:
         return
     with tempfile.TemporaryDirectory() as folder:

@@ -71,7 +71,7 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
                     agent, _ = build_agent(curriculum.agent, [(p.task, p.task_file) for p in curriculum.phases],
                                            curriculum.spec.seed, path, curriculum.agent_file)
-                    load_init_from(curriculum, agent)
+                    load_init_from(curriculum, agent, curriculum.spec.seed)
                 lines = curriculum_summary(curriculum)
                 for warning in curriculum.warnings:
                     print(f"warning: {warning}", file=sys.stderr)

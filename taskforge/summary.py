@@ -120,7 +120,8 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     )
     if cur.init_from is not None:
         learnt = "model and data" if cur.agent.algo == "mpc" else "networks and normaliser statistics"
-        lines.append(f"  start from the {learnt} of {cur.init_from} (optimizer, steps and curriculum fresh)")
+        per_seed = " ({seed}: the run's seed)" if cur.init_source(0) != cur.init_from else ""
+        lines.append(f"  start from the {learnt} of {cur.init_from}{per_seed} (optimizer, steps and curriculum fresh)")
     ws = spec.warm_start
     if ws is not None:
         tasks = " + ".join(f"{p.task.name}:{ws.stage or p.stages[-1]}" for p in cur.warm_start_phases())

@@ -314,6 +314,32 @@ def test_init_from_starts_with_another_runs_weights_and_statistics_but_a_fresh_c
     assert not torch.allclose(load_checkpoint(fresh / "final.pt")["agent"]["policy"][first], learnt["policy"][first], atol=1e-3)
 
 
+def test_init_from_with_a_seed_placeholder_starts_each_seed_from_its_own_source(tmp_path, capsys):
+    for seed in (3, 4):
+        train(write_curriculum(tmp_path, total_steps=200), run_dir=tmp_path / f"source-seed{seed}", seed=seed, progress=False)
+    (tmp_path / "still.yaml").write_text(yaml.safe_dump({**AGENT, "ppo": {**AGENT["ppo"], "learning_rate": 1e-12}}))
+    cur = write_curriculum(tmp_path, total_steps=200, agent="still.yaml", init_from="source-seed{seed}")
+    assert main(["validate", str(cur)]) == 0  # checked at the curriculum's own seed, 3
+    assert "source-seed{seed} ({seed}: the run's seed)" in capsys.readouterr().out
+    run = train(cur, run_dir=tmp_path / "continued", seed=4, progress=False)
+    state = load_checkpoint(run / "final.pt")["agent"]["policy"]
+    own, other = (load_checkpoint(tmp_path / f"source-seed{s}" / "final.pt")["agent"]["policy"] for s in (4, 3))
+    first = next(iter(own))
+    torch.testing.assert_close(state[first], own[first], atol=1e-6, rtol=0)
+    assert not torch.allclose(state[first], other[first], atol=1e-3)
+    # a seed whose source does not exist: one line naming it, nothing written
+    capsys.readouterr()  # the run's progress lines
+    assert main(["train", str(cur), "--seed", "5", "--run-dir", str(tmp_path / "run5"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"error: {cur}: init_from: ") and str(tmp_path / "source-seed5") in err[0], err
+    assert not (tmp_path / "run5").exists()
+    # any other placeholder is a schema error
+    bad = write_curriculum(tmp_path, init_from="source-{run}")
+    assert main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "init_from" in err[0] and "the only placeholder init_from may hold is {seed}" in err[0], err
+
+
 @pytest.mark.parametrize("case", ["other-network", "missing", "with-warm-start"])
 def test_init_from_that_cannot_be_used_is_one_line_and_writes_nothing(case, tmp_path, capsys):
     if case != "missing":

@@ -9,12 +9,14 @@ from pathlib import Path
 
 from taskforge.backends import backend_features, backend_issues
 from taskforge.spec import (
+    SEED_PLACEHOLDER,
     AgentSpec,
     CurriculumSpec,
     SpecError,
     SpecIssue,
     TaskSpec,
     expected_one_of,
+    init_for_seed,
     load_agent_spec,
     load_curriculum_spec,
     load_task_spec,
@@ -50,10 +52,16 @@ class ResolvedCurriculum:
     demos_file: Path | None = None
     """`warm_start.demos`, resolved relative to the curriculum file."""
     init_from: Path | None = None
-    """`init_from` (a run directory or checkpoint file), resolved relative to the curriculum file."""
+    """`init_from` (a run directory or checkpoint file), resolved relative to the curriculum file;
+    may hold `{seed}` (`init_source` fills it)."""
     warnings: tuple[str, ...] = ()
     """Legal but probably unintended (see `curriculum_warnings`): `validate` and `train` print them
     and `train` writes them to the run's events."""
+
+    def init_source(self, seed: int) -> Path | None:
+        """The run directory or checkpoint the run of `seed` starts from (`init_from` with its
+        `{seed}` filled); None without `init_from`."""
+        return None if self.init_from is None else Path(init_for_seed(str(self.init_from), seed))
 
     def warm_start_phases(self) -> list[CurriculumPhase]:
         """The phases the warm start's demos and DAgger rollouts come from (`warm_start.phase`)."""
@@ -94,7 +102,9 @@ def load_curriculum(path: str | Path) -> ResolvedCurriculum:
         if spec.warm_start is not None:
             msg = "both set the policy a run starts from; expected one of init_from (a trained run) and warm_start (demonstrations)"
             issues.append(SpecIssue(str(path), "init_from", msg))
-        elif not init_from.exists():
+        elif SEED_PLACEHOLDER not in spec.init_from and not init_from.exists():
+            # with `{seed}` the source depends on the seed, known when a run starts: `train` and
+            # `validate` (at the curriculum's seed) check it then, in `load_init_from`
             issues.append(SpecIssue(str(path), "init_from", f"no such run directory or checkpoint file: {init_from}"))
     if issues:
         raise SpecError(issues)

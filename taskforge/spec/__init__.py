@@ -5,7 +5,7 @@ This package imports nothing else of taskforge: everything else depends on it.
 
 from taskforge.spec.agent import AgentSpec, PolicySpec, PPOSpec
 from taskforge.spec.common import Distribution, StrictModel
-from taskforge.spec.curriculum import CurriculumSpec, PhaseSpec
+from taskforge.spec.curriculum import SEED_PLACEHOLDER, CurriculumSpec, PhaseSpec, init_for_seed
 from taskforge.spec.errors import SpecError, SpecIssue, did_you_mean, expected_one_of, format_path
 from taskforge.spec.loader import (
     load_agent_spec,
@@ -32,6 +32,7 @@ from taskforge.spec.task import (
 )
 
 __all__ = [
+    "SEED_PLACEHOLDER",
     "AgentSpec",
     "ConditionSpec",
     "CurriculumSpec",
@@ -53,6 +54,7 @@ __all__ = [
     "did_you_mean",
     "expected_one_of",
     "format_path",
+    "init_for_seed",
     "load_agent_spec",
     "load_curriculum_spec",
     "load_sweep_spec",

@@ -9,6 +9,13 @@ from pydantic import Field, field_validator, model_validator
 
 from taskforge.spec.common import StrictModel
 
+SEED_PLACEHOLDER = "{seed}"
+
+
+def init_for_seed(init_from: str, seed: int) -> str:
+    """`init_from` for the run of `seed`: its `{seed}` replaced (a path without one is returned as is)."""
+    return init_from.replace(SEED_PLACEHOLDER, str(seed))
+
 
 class PromotionSpec(StrictModel):
     """Promote when success over the last `window` episodes of the current stage is at least
@@ -213,4 +220,12 @@ class CurriculumSpec(StrictModel):
     and curriculum start fresh. Why: to carry what one curriculum taught into another (a search
     learnt on one plane of a box into the whole box, a policy into a new robot variant) without
     learning it again. The agent preset must build the same networks. Read only when a run
-    starts, not on `--resume`."""
+    starts, not on `--resume`. `{seed}` in it becomes the run's seed (`init_for_seed`), so each
+    seed of a multi-seed fine-tune starts from its own source run, not all from one."""
+
+    @field_validator("init_from")
+    @classmethod
+    def _only_the_seed_placeholder(cls, init_from: str | None) -> str | None:
+        if init_from is not None and ("{" in init_from.replace(SEED_PLACEHOLDER, "") or "}" in init_from.replace(SEED_PLACEHOLDER, "")):
+            raise ValueError(f"the only placeholder init_from may hold is {SEED_PLACEHOLDER} (the run's seed); got {init_from!r}")
+        return init_from

@@ -90,7 +90,7 @@ def train(
         agent.load_state_dict(start.state["agent"])
         scheduler.load_state_dict(start.state["curriculum"])
     elif cur.init_from is not None:
-        load_init_from(cur, agent)
+        load_init_from(cur, agent, start.seed)
     # demos: pretraining (fresh runs only) and PPO's decaying BC term; writes no file yet
     warm = prepare_warm_start(cur, agent, run, start.seed, resumed=start.state is not None, progress=progress)
 
@@ -111,7 +111,7 @@ def train(
     if start.state is None and cur.init_from is not None:  # the curve starts where the loaded weights stand on this curriculum
         results = session.evaluate()
         session.logger.log(0, _eval_metrics(results))
-        session.say(_eval_line(results, f"from {cur.init_from.name}"))
+        session.say(_eval_line(results, f"from {cur.init_source(start.seed).name}"))
     session.run(until=start.total if stop_at is None else min(start.total, stop_at))
     return run.path
 
@@ -155,13 +155,14 @@ def _start(cur: ResolvedCurriculum, run: RunDir, seed: int | None, steps: int | 
     return _Start(seed, total, run_config(cur, seed, total), state)
 
 
-def load_init_from(cur: ResolvedCurriculum, agent: Agent) -> None:
+def load_init_from(cur: ResolvedCurriculum, agent: Agent, seed: int) -> None:
     """`agent` (fresh, built for `cur`) takes the learnt weights of the run `cur`'s `init_from`
-    names. A run without a policy yet, an unreadable file or weights that do not fit are one
-    `SpecError` at `init_from`, raised before anything is written (`validate` calls this too)."""
+    names for the run of `seed`. A run without a policy yet, an unreadable file or weights that do
+    not fit are one `SpecError` at `init_from`, raised before anything is written (`validate`
+    calls this too, at the curriculum's seed)."""
     assert cur.init_from is not None
     try:
-        source = policy_file(cur.init_from)
+        source = policy_file(cur.init_source(seed))
         state = load_checkpoint(source)
     except SpecError as exc:
         raise SpecError.single(cur.file, "init_from", str(exc.issues[0])) from None
