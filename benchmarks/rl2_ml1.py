@@ -6,7 +6,7 @@ of RL² next to a memoryless PPO baseline.
                                  rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
                                  rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid rl2-reach-zone-find-deep rl2-reach-zone-find-more
                                  rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-long ppo-reach-zone-find ppo-reach-zone-plane
-                                 rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold rl2-push-zone-find ppo-push-zone-find
+                                 rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold rl2-push-zone-find ppo-push-zone-find rl2-push-zone-find-short ppo-push-zone-find-short
                                  ppo-reach rl2-push ppo-push rl2-pick-place]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
 
@@ -85,6 +85,8 @@ VARIANTS = {
     "ppo-push-hold": ROOT / "benchmarks/configs/ml1_push_ppo_hold.yaml",
     "rl2-push-zone-find": ROOT / "benchmarks/configs/ml1_push_rl2_zone_find.yaml",
     "ppo-push-zone-find": ROOT / "benchmarks/configs/ml1_push_ppo_zone_find.yaml",
+    "rl2-push-zone-find-short": ROOT / "benchmarks/configs/ml1_push_rl2_zone_find_short.yaml",
+    "ppo-push-zone-find-short": ROOT / "benchmarks/configs/ml1_push_ppo_zone_find_short.yaml",
     "rl2-pick-place": ROOT / "benchmarks/configs/ml1_pick_place_rl2.yaml",
 }
 RUNS = ROOT / "benchmarks/runs/rl2"

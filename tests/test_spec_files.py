@@ -19,6 +19,7 @@ MEMORYLESS_BASELINES = {
     "benchmarks/configs/ml1_push_ppo_hand.yaml",
     "benchmarks/configs/ml1_push_ppo_hold.yaml",
     "benchmarks/configs/ml1_push_ppo_zone_find.yaml",
+    "benchmarks/configs/ml1_push_ppo_zone_find_short.yaml",
     "benchmarks/configs/ml1_reach_ppo.yaml",
     "benchmarks/configs/ml1_reach_ppo_zone_find.yaml",
     "benchmarks/configs/ml1_reach_ppo_zone_plane.yaml",
