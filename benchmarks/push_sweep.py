@@ -16,7 +16,12 @@ two references its adaptation curve is read against, on the same task, stage (`p
 The push: the demos' push planner (taskforge.demos.policies.WaypointPlanner), aimed at a point
 35 cm from the puck's start along a heading instead of at the goal, until the episode ends
 (success ends it). A heading is in degrees from +y (away from the robot, where ML1 push's goals
-lie), positive toward +x. 2-core AMD EPYC: ~1 min for 50 trials.
+lie), positive toward +x. 2-core AMD EPYC: ~10 s for 50 trials.
+
+These are straight pushes, so the memoryless level here is a floor, not the best a memoryless
+search can do: ML1 push's goals all lie within 5 cm of the line y = 0.85 m, and a push that
+sweeps the puck along it (what the memoryless PPO baseline learnt, ppo-push-zone-find) finds
+0.96 in one 150-step episode (benchmarks/RESULTS.md, "ML1 push: the find-once shape").
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from taskforge.envs import ResolvedCurriculum
-from taskforge.spec import AgentSpec, ConditionSpec, TaskSpec
+from taskforge.spec import SEED_PLACEHOLDER, AgentSpec, ConditionSpec, TaskSpec
 from taskforge.spec.curriculum import PromotionSpec
 
 
@@ -120,7 +120,7 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     )
     if cur.init_from is not None:
         learnt = "model and data" if cur.agent.algo == "mpc" else "networks and normaliser statistics"
-        per_seed = " ({seed}: the run's seed)" if cur.init_source(0) != cur.init_from else ""
+        per_seed = f" ({SEED_PLACEHOLDER}: the run's seed)" if SEED_PLACEHOLDER in (cur.spec.init_from or "") else ""
         lines.append(f"  start from the {learnt} of {cur.init_from}{per_seed} (optimizer, steps and curriculum fresh)")
     ws = spec.warm_start
     if ws is not None:

@@ -226,6 +226,7 @@ class CurriculumSpec(StrictModel):
     @field_validator("init_from")
     @classmethod
     def _only_the_seed_placeholder(cls, init_from: str | None) -> str | None:
-        if init_from is not None and ("{" in init_from.replace(SEED_PLACEHOLDER, "") or "}" in init_from.replace(SEED_PLACEHOLDER, "")):
+        rest = "" if init_from is None else init_from.replace(SEED_PLACEHOLDER, "")
+        if "{" in rest or "}" in rest:
             raise ValueError(f"the only placeholder init_from may hold is {SEED_PLACEHOLDER} (the run's seed); got {init_from!r}")
         return init_from
