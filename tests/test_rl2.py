@@ -15,6 +15,7 @@ import yaml
 from gymnasium.spaces import Box
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
+from benchmarks.rl2_ml1 import evaluation_points
 from benchmarks.rl2_recall import play, summarize
 from taskforge.agents import PPOAgent, RL2Trial, agent_observation_space
 from taskforge.cli import main
@@ -428,8 +429,6 @@ def _seed(*steps: int) -> dict:
 
 
 def test_the_ml1_report_groups_sibling_seeds_evaluations_by_step_not_by_index():
-    from benchmarks.rl2_ml1 import evaluation_points
-
     # a seed evaluated at 1M and 2M beside one evaluated only at its end: 2M goes with 2M
     points = evaluation_points([_seed(1_008_000, 2_006_400), _seed(2_006_400)])
     assert [p["steps"] for p in points] == [[1_008_000], [2_006_400, 2_006_400]]
