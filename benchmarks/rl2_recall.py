@@ -2,6 +2,7 @@
 later episodes gain less than a remembered find should give them.
 
     python benchmarks/rl2_recall.py RUN_DIR [--trials 50] [--split test] [--trial-episodes K] [--sampled]
+                                    [--point tcp|object]
 
 Why: on ML1's whole reach box (goal hidden, an episode ends at its find) rl2-reach-zone-find-mid
 at 10M finds the goal in episode 1 on ~0.58 of held-out trials, yet after a first-episode *hit*
@@ -11,7 +12,12 @@ episode's closest approach to the goal and to episode 1's end point tells which 
 failures it is: a *close miss* (the hand comes back to within a few cm of the remembered point
 but not inside the ball: the memory is there and imprecise) or a *wander* (the hand never comes
 near it: the memory is lost, or the policy searches again). After a first-episode *miss* the
-same numbers say how far the later searches get.
+same numbers say how far the later searches get, and how far each later episode ends from where
+episode 1 ended: near it after a miss, the policy repeated its first search instead of trying
+elsewhere.
+
+`--point object` traces the object instead of the hand, for tasks whose success is the object's
+(push: the puck is what has to reach the goal, and where it ends is what the trial can learn from).
 
 Plays the run's evaluation stage (`curriculum.evaluation.stage`) on `--trials` trials, trial n
 on goal n of the split and seeded n, as `taskforge eval` does, one env, with the policy's mean
@@ -41,24 +47,32 @@ CLOSE = 0.03
 many metres came back to it: the ball is 5 cm, so such an episode missed by imprecision."""
 
 
-class HandTrace(gymnasium.Wrapper):
-    """Keeps the hand's (tcp) path of every episode of the wrapped task env, with its goal, so
-    the episode ends that `RL2Trial` resets inside its step are kept. `episodes` is the caller's
-    to clear at a trial's start."""
+POINTS = {"tcp": "tcp_pos", "object": "object_pos"}
+"""What `--point` may trace: the backend feature of each."""
 
-    def __init__(self, env: gymnasium.Env) -> None:
+
+class PathTrace(gymnasium.Wrapper):
+    """Keeps the path of one point (the hand's tcp, or the object) in every episode of the
+    wrapped task env, with its goal, so the episode ends that `RL2Trial` resets inside its step
+    are kept. `episodes` is the caller's to clear at a trial's start."""
+
+    def __init__(self, env: gymnasium.Env, point: str = "tcp") -> None:
         super().__init__(env)
+        self.feature = POINTS[point]
+        backend = env.unwrapped.backend
+        if self.feature not in backend.provides:
+            raise SystemExit(f"--point {point}: the {type(backend).__name__} backend has no {self.feature} (it provides {sorted(backend.provides)})")
         self.episodes: list[dict[str, Any]] = []
         self._path: list[np.ndarray] = []
 
     def reset(self, **kwargs: Any):
         out = self.env.reset(**kwargs)
-        self._path = [self._tcp()]
+        self._path = [self._point()]
         return out
 
     def step(self, action: np.ndarray):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self._path.append(self._tcp())
+        self._path.append(self._point())
         if terminated or truncated:
             path = np.array(self._path)
             goal = np.array(self.env.unwrapped.backend.features()["goal_pos"])
@@ -72,22 +86,27 @@ class HandTrace(gymnasium.Wrapper):
             )
         return obs, reward, terminated, truncated, info
 
-    def _tcp(self) -> np.ndarray:
-        return np.array(self.env.unwrapped.backend.features()["tcp_pos"])
+    def _point(self) -> np.ndarray:
+        return np.array(self.env.unwrapped.backend.features()[self.feature])
 
 
 def play(
-    path: str | Path, trials: int = 50, split: str = "test", trial_episodes: int | None = None, sampled: bool = False
+    path: str | Path,
+    trials: int = 50,
+    split: str = "test",
+    trial_episodes: int | None = None,
+    sampled: bool = False,
+    point: str = "tcp",
 ) -> tuple[LoadedRun, str, list[list[dict[str, Any]]]]:
     """The run (a run directory or checkpoint), its evaluation stage and `trials` trials of it
-    as `HandTrace` recorded them: trial n on goal n of the split, seeded n, as `taskforge eval`
-    plays them, in one env."""
+    as `PathTrace` recorded `point`'s path: trial n on goal n of the split, seeded n, as
+    `taskforge eval` plays them, in one env."""
     run = load_run(path)
     stage = run.config["curriculum"]["evaluation"]["stage"] or run.phases[0][2][0]
     task, task_file, _ = next(p for p in run.phases if stage in p[2])
     agent = run.agent
     k = trial_episodes or agent.spec.trial_episodes
-    trace = HandTrace(TaskEnv(task, task_file, stage=stage, split=split, privileged=agent.privileged_dim > 0))
+    trace = PathTrace(TaskEnv(task, task_file, stage=stage, split=split, privileged=agent.privileged_dim > 0), point)
     env = trial_env(agent, trace, k)
     num_goals = trace.unwrapped.backend.num_goals(split)
     agent.generator.manual_seed(0)
@@ -109,8 +128,8 @@ def play(
 
 def later_episodes(trials: list[list[dict[str, Any]]], first_hit: bool) -> dict[str, Any]:
     """Episodes 2..K of the trials whose first episode hit (`first_hit`) or missed: how many
-    found the goal, and of the misses how close they came to the goal and, after a hit, to
-    episode 1's end point (the remembered find)."""
+    found the goal, how far each ended from where episode 1 ended, and of the misses how close
+    they came to the goal and, after a hit, to episode 1's end point (the remembered find)."""
     rows = []
     for episodes in trials:
         if episodes[0]["success"] != first_hit:
@@ -123,10 +142,13 @@ def later_episodes(trials: list[list[dict[str, Any]]], first_hit: bool) -> dict[
                     e["min_goal"],
                     float(np.linalg.norm(e["path"] - find, axis=1).min()),
                     float(np.linalg.norm(e["path"] - seen, axis=1).min()),
+                    float(np.linalg.norm(e["path"][-1] - find)),
                 )
             )
     misses = [r for r in rows if not r[0]]
     out: dict[str, Any] = {"episodes": len(rows), "found": sum(r[0] for r in rows), "missed": len(misses)}
+    if rows:
+        out["end_to_first_end_m"] = spread([r[4] for r in rows])
     if misses:
         out["miss_closest_to_goal_m"] = spread([r[1] for r in misses])
         if first_hit:
@@ -170,9 +192,10 @@ def main() -> None:
     parser.add_argument("--split", choices=["train", "test"], default="test")
     parser.add_argument("--trial-episodes", type=int, default=None, help="default: the agent's K")
     parser.add_argument("--sampled", action="store_true", help="sample actions instead of the mean")
+    parser.add_argument("--point", choices=list(POINTS), default="tcp", help="the point traced: the hand (reach) or the object (push)")
     args = parser.parse_args()
 
-    run, stage, trials = play(args.run_dir, args.trials, args.split, args.trial_episodes, args.sampled)
+    run, stage, trials = play(args.run_dir, args.trials, args.split, args.trial_episodes, args.sampled, args.point)
     k = len(trials[0])
     summary = summarize(trials)
     print(f"{args.run_dir} ({run.agent.global_step:,} steps), {args.split} split, {args.trials} trials of {k}, stage {stage}")
@@ -191,6 +214,7 @@ def main() -> None:
         "miss: closest to episode 1's end",
         "... to its last point seen",
         f"came back within {CLOSE * 100:.0f} cm",
+        "end to episode 1's end (all)",
     ]
     print_table(
         headers,
@@ -204,6 +228,7 @@ def main() -> None:
                 shown(s.get("miss_closest_to_find_m")),
                 shown(s.get("miss_closest_to_seen_m")),
                 s.get("close_misses", "-"),
+                shown(s.get("end_to_first_end_m")),
             ]
             for name, s in (("hit", summary["after_hit"]), ("miss", summary["after_miss"]))
         ],

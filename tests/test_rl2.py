@@ -282,6 +282,10 @@ def test_recall_probe_replays_the_meta_test_trials_and_keeps_every_episodes_path
         if summary[side]["missed"]:
             assert summary[side]["miss_closest_to_goal_m"]["median"] >= 0.2
     assert summary["per_episode"] == pytest.approx(np.mean(meta_test.successes, axis=0).tolist())
+    ends = [np.linalg.norm(e["path"][-1] - t[0]["path"][-1]) for t in played if not t[0]["success"] for e in t[1:]]
+    assert summary["after_miss"]["end_to_first_end_m"]["median"] == pytest.approx(np.median(ends))
+    with pytest.raises(SystemExit, match="no object_pos"):  # the point mass has no object to trace
+        play(run, trials=1, point="object")
 
 
 # ------------------------------------------------------------------------------------ meta-test
