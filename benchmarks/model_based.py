@@ -7,7 +7,8 @@ Meta-World with the goal observable: held-out success vs env steps, and wall-clo
 Variants (benchmarks/configs/, one file each) and the goals of issue 23:
 - `mpc-reach` / `ppo-reach`: reach, 50k steps; MPC >= 0.90 held-out within 50k;
 - `mpc-push` / `ppo-push`: push, 200k; MPC >= 0.95 within 200k; `mpc-push-value` the same with
-  a terminal value at the plan's end (agents/mpc_value.yaml);
+  a terminal value at the plan's end (agents/mpc_value.yaml), `mpc-push-large` with that value and
+  a 3 x 256 ensemble (agents/mpc_large.yaml);
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py);
 - `mpc-pick-place-demos`: the same with 50 scripted episodes seeding the model, 100k; >= 0.95
@@ -34,10 +35,11 @@ from taskforge.run import RunDir  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "benchmarks/configs"
 VARIANTS = {name: CONFIGS / f"{name.replace('-', '_')}.yaml" for name in (
-    "mpc-reach", "ppo-reach", "mpc-push", "mpc-push-value", "ppo-push", "mpc-pick-place", "mpc-pick-place-demos")}
-BUDGET = {"mpc-reach": 50_000, "ppo-reach": 50_000, "mpc-push": 200_000, "mpc-push-value": 200_000, "ppo-push": 200_000,
-          "mpc-pick-place": 1_000_000, "mpc-pick-place-demos": 100_000}
-GOAL = {"mpc-reach": 0.90, "mpc-push": 0.95, "mpc-push-value": 0.95, "mpc-pick-place": 0.80, "mpc-pick-place-demos": 0.95}
+    "mpc-reach", "ppo-reach", "mpc-push", "mpc-push-value", "mpc-push-large", "ppo-push", "mpc-pick-place", "mpc-pick-place-demos")}
+BUDGET = {"mpc-reach": 50_000, "ppo-reach": 50_000, "mpc-push": 200_000, "mpc-push-value": 200_000, "mpc-push-large": 200_000,
+          "ppo-push": 200_000, "mpc-pick-place": 1_000_000, "mpc-pick-place-demos": 100_000}
+GOAL = {"mpc-reach": 0.90, "mpc-push": 0.95, "mpc-push-value": 0.95, "mpc-push-large": 0.95,
+        "mpc-pick-place": 0.80, "mpc-pick-place-demos": 0.95}
 RUNS = ROOT / "benchmarks/runs/model_based"
 
 
@@ -47,8 +49,8 @@ def curve(run_dir: Path) -> list[tuple[int, float]]:
 
 
 def task_of(variant: str) -> str:
-    """The task a variant runs (`mpc-push-value` -> `push`): one plot panel each."""
-    return variant.split("-", 1)[1].removesuffix("-value")
+    """The task a variant runs (`mpc-push-value`, `mpc-push-large` -> `push`): one plot panel each."""
+    return variant.split("-", 1)[1].removesuffix("-value").removesuffix("-large")
 
 
 def plot(runs: dict[str, dict], out: Path) -> Path:
