@@ -242,6 +242,7 @@ def main() -> None:
         "trial_episodes": k,
         "stage": stage,
         "actions": "sampled" if args.sampled else "mean",
+        "point": args.point,
         **summary,
     }
     print(f"wrote {write_result(f'rl2_recall_{run_name}' + ('_sampled' if args.sampled else ''), payload)}")
