@@ -2,7 +2,7 @@
 several seeds, and the adaptation curve (success at episode 1..K of a trial on held-out goals)
 of RL² next to a memoryless PPO baseline.
 
-    python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-mwplus rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
+    python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-mwplus ppo-reach-mwplus rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
                                  rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
                                  rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid rl2-reach-zone-find-deep rl2-reach-zone-find-more
                                  rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-long ppo-reach-zone-find ppo-reach-zone-plane
@@ -55,6 +55,7 @@ VARIANTS = {
     "rl2-reach-short": ROOT / "benchmarks/configs/ml1_reach_rl2_short.yaml",
     "rl2-reach-native": ROOT / "benchmarks/configs/ml1_reach_rl2_native.yaml",
     "rl2-reach-mwplus": ROOT / "benchmarks/configs/ml1_reach_rl2_mwplus.yaml",
+    "ppo-reach-mwplus": ROOT / "benchmarks/configs/ml1_reach_ppo_mwplus.yaml",
     "rl2-reach-sparse": ROOT / "benchmarks/configs/ml1_reach_rl2_sparse.yaml",
     "rl2-reach-linear": ROOT / "benchmarks/configs/ml1_reach_rl2_linear.yaml",
     "rl2-reach-progress": ROOT / "benchmarks/configs/ml1_reach_rl2_progress.yaml",

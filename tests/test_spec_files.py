@@ -21,6 +21,7 @@ MEMORYLESS_BASELINES = {
     "benchmarks/configs/ml1_push_ppo_zone_find.yaml",
     "benchmarks/configs/ml1_push_ppo_zone_find_short.yaml",
     "benchmarks/configs/ml1_reach_ppo.yaml",
+    "benchmarks/configs/ml1_reach_ppo_mwplus.yaml",
     "benchmarks/configs/ml1_reach_ppo_zone_find.yaml",
     "benchmarks/configs/ml1_reach_ppo_zone_plane.yaml",
     "benchmarks/configs/point_semicircle_ppo.yaml",
