@@ -7,7 +7,7 @@ of RL² next to a memoryless PPO baseline.
                                  rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid rl2-reach-zone-find-deep rl2-reach-zone-find-more
                                  rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-long ppo-reach-zone-find ppo-reach-zone-plane
                                  rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold rl2-push-zone-find ppo-push-zone-find rl2-push-zone-find-short ppo-push-zone-find-short
-                                 ppo-reach rl2-push ppo-push rl2-pick-place]
+                                 ppo-reach rl2-push ppo-push rl2-pick-place rl2-pick-place-mwplus]
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
 
 The full budget takes many hours on 2 cores, so the script works in chunks (like
@@ -15,7 +15,7 @@ pick_place_curriculum.py): each call advances every run by at most `--chunk-step
 from its checkpoint, then evaluates the checkpoint on `--trials` trials of the ML1 train goals
 (meta-train) and of the 50 held-out goals (meta-test), each trial K episodes from a fresh
 hidden state (K the agent's `rl2.trial_episodes`, 5 for every shipped variant but
-rl2-reach-mwplus's 10, Meta-World+'s; the PPO baseline
+rl2-reach-mwplus's and rl2-pick-place-mwplus's 10, Meta-World+'s; the PPO baseline
 plays trials of 5; it cannot adapt, so its curve is flat),
 once acting with the policy's mean and once sampling from it (as Duan et al.'s meta-test; an RL²
 policy's first-episode search may live in its sampling noise). A finished run given again gets
@@ -91,6 +91,7 @@ VARIANTS = {
     "rl2-push-zone-find-short": ROOT / "benchmarks/configs/ml1_push_rl2_zone_find_short.yaml",
     "ppo-push-zone-find-short": ROOT / "benchmarks/configs/ml1_push_ppo_zone_find_short.yaml",
     "rl2-pick-place": ROOT / "benchmarks/configs/ml1_pick_place_rl2.yaml",
+    "rl2-pick-place-mwplus": ROOT / "benchmarks/configs/ml1_pick_place_rl2_mwplus.yaml",
 }
 RUNS = ROOT / "benchmarks/runs/rl2"
 TRIAL_EPISODES = 5  # agents/rl2.yaml's K; a PPO baseline is evaluated over trials of this many episodes
