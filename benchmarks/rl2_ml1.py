@@ -2,12 +2,7 @@
 several seeds, and the adaptation curve (success at episode 1..K of a trial on held-out goals)
 of RL² next to a memoryless PPO baseline.
 
-    python benchmarks/rl2_ml1.py [--variants rl2-reach rl2-reach-whole-trial rl2-reach-explore rl2-reach-short rl2-reach-native rl2-reach-mwplus ppo-reach-mwplus rl2-reach-sparse rl2-reach-linear rl2-reach-progress rl2-reach-plane rl2-reach-found
-                                 rl2-reach-found-explore rl2-reach-found-short rl2-reach-found-calm rl2-reach-found-hand rl2-reach-box-hand
-                                 rl2-reach-zone rl2-reach-zone-find rl2-reach-zone-find-calm rl2-reach-zone-find-mid rl2-reach-zone-find-deep rl2-reach-zone-find-more
-                                 rl2-reach-zone-find-short rl2-reach-zone-plane rl2-reach-zone-grow rl2-reach-zone-box-from-plane rl2-reach-zone-box-from-plane-long ppo-reach-zone-find ppo-reach-zone-plane
-                                 rl2-push-hand ppo-push-hand rl2-push-hold ppo-push-hold rl2-push-zone-find ppo-push-zone-find rl2-push-zone-find-short ppo-push-zone-find-short
-                                 ppo-reach rl2-push ppo-push rl2-pick-place rl2-pick-place-mwplus]
+    python benchmarks/rl2_ml1.py [--variants NAME ...]   (every name in VARIANTS below; --help lists them)
                                  [--seeds 0 1 2] [--steps 2000000] [--chunk-steps 500000] [--trials 50]
 
 The full budget takes many hours on 2 cores, so the script works in chunks (like
