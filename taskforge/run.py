@@ -31,6 +31,7 @@ from typing import Any
 import torch
 
 from taskforge.agents import Agent, agent_observation_space, make_agent
+from taskforge.agents.runtime import device_available
 from taskforge.atomic import atomic_write
 from taskforge.envs import PhaseShapes, probe_phases
 from taskforge.spec import AgentSpec, SpecError, TaskSpec
@@ -153,6 +154,9 @@ def build_agent(
     """The agent for a curriculum's phases (one policy for all: their shapes must agree). Used to
     start a run and to load one, so both build exactly the same networks."""
     privileged = agent_spec.asymmetric_critic
+    if agent_spec.algo == "mpc" and not device_available(agent_spec.planning.device):
+        raise SpecError.single(agent_file, "mpc.device", f"{agent_spec.planning.device!r}, but torch {torch.__version__} finds no such "
+                               f"device here ({torch.cuda.device_count()} CUDA devices); set it to cpu or to a CUDA device present")
     shapes = probe_phases(phases, privileged, where)
     if privileged and shapes.privileged_size == 0:
         raise SpecError.single(agent_file, "asymmetric_critic", "the curriculum's backends expose no privileged features; set it to false")
@@ -197,6 +201,9 @@ def load_run(path: str | Path) -> LoadedRun:
         phases = [(TaskSpec.model_validate(p["task"]), p["task_file"]) for p in config["phases"]]
     except (KeyError, TypeError, ValueError) as exc:
         raise SpecError.single(checkpoint, "config", f"not the config of a taskforge run ({exc.__class__.__name__})") from None
+    if agent_spec.algo == "mpc" and not device_available(agent_spec.planning.device):
+        # a policy trained on a GPU is still evaluated (rendered, fine-tuned from) where there is none
+        agent_spec = agent_spec.model_copy(update={"mpc": agent_spec.planning.model_copy(update={"device": "cpu"})})
     agent, shapes = build_agent(agent_spec, phases, config["seed"], checkpoint, checkpoint)
     agent.load_state_dict(state["agent"])
     return LoadedRun(agent, config, shapes, checkpoint)

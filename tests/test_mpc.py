@@ -9,15 +9,17 @@ import numpy as np
 import pytest
 import torch
 import yaml
+from gymnasium.spaces import Box
 
+from taskforge.agents import MPCAgent
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan
 from taskforge.agents.value import TerminalValue
 from taskforge.cli import main
 from taskforge.demos import record, save
 from taskforge.envs import TaskEnv, load_task
-from taskforge.run import read_jsonl
-from taskforge.spec import AgentSpec
+from taskforge.run import load_run, read_jsonl
+from taskforge.spec import AgentSpec, load_agent_spec
 from taskforge.spec.agent import MPCSpec
 from taskforge.training import train
 from tests.conftest import ROOT
@@ -159,6 +161,46 @@ def test_mpc_agent_files_are_checked_like_any_other(tmp_path, capsys):
     assert "multiple of 'ensemble_size'" in capsys.readouterr().err
     with pytest.raises(ValueError, match="needs algo: mpc"):
         AgentSpec.model_validate({"name": "x", "mpc": {}})
+
+
+CUDA = torch.cuda.is_available()
+
+
+@pytest.mark.skipif(CUDA, reason="the message of a machine without CUDA")
+def test_a_missing_gpu_is_a_one_line_error_and_a_gpu_trained_run_evaluates_on_the_cpu(tmp_path, capsys):
+    """`mpc.device: cuda` where torch finds none stops `train` with one line naming the agent file
+    and the field; a run whose stored config says cuda still loads and evaluates on the CPU."""
+    cur = write(tmp_path, total_steps=400, mpc={"device": "cuda"})
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "gpu")]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert "agent.yaml" in line and "mpc.device" in line and "'cuda'" in line and "set it to cpu" in line
+    rarely = {"every_steps": 100_000, "episodes": 2, "split": "test"}
+    run = train(write(tmp_path, total_steps=400, evaluation=rarely), run_dir=tmp_path / "cpu", progress=False)
+    path = run / "final.pt"
+    state = torch.load(path, map_location="cpu", weights_only=True)
+    state["config"]["agent"]["mpc"]["device"] = "cuda"  # as if it had been trained on a GPU
+    torch.save(state, path)
+    loaded = load_run(run)
+    assert loaded.agent.device.type == "cpu"
+    assert main(["eval", str(run), "--episodes", "2", "--out", str(tmp_path / "eval.json")]) == 0
+
+
+@pytest.mark.skipif(not CUDA, reason="needs a CUDA device (run on a GPU machine)")
+def test_on_a_gpu_the_agent_starts_from_the_cpu_weights_and_learns_to_reach(tmp_path):
+    """The same seed gives the same initial model on either device (it is built on the CPU),
+    and on the GPU the agent trains and reaches the held-out goals as on the CPU."""
+    cur = write(tmp_path, total_steps=2000, mpc={"device": "cuda"})
+    spec = load_agent_spec(tmp_path / "agent.yaml")
+    space, actions = Box(-np.inf, np.inf, (4,), np.float32), Box(-1.0, 1.0, (2,), np.float32)
+    weights = [MPCAgent(spec.model_copy(update={"mpc": spec.planning.model_copy(update={"device": d})}), space, actions, seed=3)
+               .model.state_dict() for d in ("cpu", "cuda")]
+    for name, tensor in weights[0].items():
+        torch.testing.assert_close(weights[1][name].cpu(), tensor)
+    run = train(cur, run_dir=tmp_path / "run", progress=False)
+    out = tmp_path / "eval.json"
+    assert main(["eval", str(run), "--episodes", "20", "--out", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["success_rate"] >= 0.8, row
 
 
 class StraightToGoal:

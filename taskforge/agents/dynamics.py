@@ -121,7 +121,7 @@ class DynamicsEnsemble(nn.Module):
 
     def _predict(self, obs: torch.Tensor, actions: torch.Tensor, generator: torch.Generator | None) -> tuple[torch.Tensor, torch.Tensor]:
         mean, logvar, reward = self((torch.cat([obs, actions], dim=-1) - self.in_mean) / self.in_std)
-        change = mean if generator is None else mean + torch.exp(0.5 * logvar) * torch.randn(mean.shape, generator=generator)
+        change = mean if generator is None else mean + torch.exp(0.5 * logvar) * torch.randn(mean.shape, generator=generator, device=mean.device)
         change = change * self.out_std[:-1] + self.out_mean[:-1]
         return obs + change, reward * self.out_std[-1] + self.out_mean[-1]
 

@@ -17,6 +17,12 @@ the curriculum, checkpoints, `--resume`, the progress bar and `taskforge eval` t
 unchanged. `act` carries each env's plan in the slot where a recurrent policy carries its state,
 so evaluation's episode starts reset it. Termination is not modelled: every shipped stage ends by
 its time limit or on success, and a planned trajectory past success only adds reward.
+
+`mpc.device` puts the model, the value and the planner on a GPU; the buffer, the bootstrap
+draws and the random first actions stay on the CPU with `generator`, so the networks start
+from the same weights and see the same batches on either device. On a GPU the planner's and the
+model's noise come from `plan_generator`, a generator there (a CPU generator cannot feed CUDA
+draws); on the CPU it is `generator` itself, one stream as before the option existed.
 """
 
 from __future__ import annotations
@@ -82,17 +88,19 @@ class MPCAgent:
         self.mpc = spec.planning
         self.observation_space, self.action_space = observation_space, action_space
         self.privileged_dim = 0  # the model reads observations only
+        self.device = torch.device(self.mpc.device)
         self.generator = torch.Generator().manual_seed(seed)
+        self.plan_generator = self.generator if self.device.type == "cpu" else torch.Generator(self.device).manual_seed(seed)
         obs_size, self.action_size = observation_space.shape[0], action_space.shape[0]
-        self.model = DynamicsEnsemble(obs_size, self.action_size, self.mpc, self.generator)
+        self.model = DynamicsEnsemble(obs_size, self.action_size, self.mpc, self.generator).to(self.device)
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=self.mpc.learning_rate, weight_decay=self.mpc.weight_decay)
         self.buffer = TransitionBuffer(self.mpc.buffer_size, obs_size, self.action_size)
         self.value: TerminalValue | None = None
         if self.mpc.terminal_value:
-            self.value = TerminalValue(obs_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau, self.generator)
+            self.value = TerminalValue(obs_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau, self.generator).to(self.device)
             self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
-        self.low = torch.as_tensor(action_space.low, dtype=torch.float32)
-        self.high = torch.as_tensor(action_space.high, dtype=torch.float32)
+        self.low = torch.as_tensor(action_space.low, dtype=torch.float32, device=self.device)
+        self.high = torch.as_tensor(action_space.high, dtype=torch.float32, device=self.device)
         self.global_step = 0
         self.num_updates = 0
         self._obs: np.ndarray | None = None
@@ -103,7 +111,7 @@ class MPCAgent:
 
     def initial_state(self, num_envs: int) -> torch.Tensor:
         """Each env's plan (`[envs, horizon, action]`, in [-1, 1]): the planner's warm start."""
-        return torch.zeros((num_envs, self.mpc.horizon, self.action_size))
+        return torch.zeros((num_envs, self.mpc.horizon, self.action_size), device=self.device)
 
     def act(self, obs: np.ndarray, state: torch.Tensor | None = None, episode_start: np.ndarray | None = None,
             deterministic: bool = True) -> tuple[np.ndarray, torch.Tensor]:
@@ -113,9 +121,9 @@ class MPCAgent:
         batch = np.atleast_2d(np.asarray(obs, dtype=np.float32))
         plans = self.initial_state(len(batch)) if state is None else state.clone()
         if episode_start is not None:
-            plans[torch.as_tensor(np.atleast_1d(episode_start), dtype=torch.bool)] = 0.0
+            plans[torch.as_tensor(np.atleast_1d(episode_start), dtype=torch.bool, device=self.device)] = 0.0
         with torch.no_grad():
-            new = plan(self.mpc, self._scorer(torch.as_tensor(batch)), plans, self.generator)
+            new = plan(self.mpc, self._scorer(torch.as_tensor(batch, device=self.device)), plans, self.plan_generator)
         return self._to_env(new[:, 0]), shift(new)
 
     def _scorer(self, obs: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
@@ -131,9 +139,9 @@ class MPCAgent:
             # rows of one member: (env, candidate, particle) flattened; every member gets them all
             actions = env_actions[:, :, None].expand(-1, -1, per_member, -1, -1).reshape(envs * n * per_member, horizon, -1)
             state = obs[:, None, None].expand(-1, n, per_member, -1).reshape(1, envs * n * per_member, -1).expand(members, -1, -1)
-            total = torch.zeros((members, envs * n * per_member))
+            total = torch.zeros((members, envs * n * per_member), device=self.device)
             for t in range(horizon):
-                state, reward = self.model.sample(state, actions[None, :, t].expand(members, -1, -1), self.generator)
+                state, reward = self.model.sample(state, actions[None, :, t].expand(members, -1, -1), self.plan_generator)
                 total += self.mpc.discount**t * reward
             if self.value is not None:
                 total += self.mpc.discount**horizon * self.value(state)
@@ -146,7 +154,7 @@ class MPCAgent:
         return self.low + (unit + 1.0) * 0.5 * (self.high - self.low)
 
     def _to_env(self, unit: torch.Tensor) -> np.ndarray:
-        return self._scale(unit).numpy().astype(self.action_space.dtype)
+        return self._scale(unit.to(self.device)).cpu().numpy().astype(self.action_space.dtype)
 
     # ------------------------------------------------------------------------------- training
 
@@ -174,7 +182,7 @@ class MPCAgent:
             for i in np.flatnonzero(ended):
                 landed[i] = infos["final_obs"][i]
             self.buffer.add(obs, actions, reward, landed)
-            plans[torch.as_tensor(ended)] = 0.0
+            plans[torch.as_tensor(ended, device=self.device)] = 0.0
             obs = next_obs
         self._obs, self._plans = obs, plans
 
@@ -187,17 +195,17 @@ class MPCAgent:
 
     def _fit(self) -> dict[str, float]:
         mpc, model = self.mpc, self.model
-        inputs, targets = self.buffer.inputs_and_targets()
+        inputs, targets = (t.to(self.device) for t in self.buffer.inputs_and_targets())
         model.fit_normalization(inputs, targets)
         batch = min(mpc.batch_size, self.buffer.size)
         total = 0.0
         for _ in range(mpc.model_updates):
             # bootstrap: each member draws its own batch with replacement
-            idx = torch.randint(self.buffer.size, (mpc.ensemble_size, batch), generator=self.generator)
+            idx = torch.randint(self.buffer.size, (mpc.ensemble_size, batch), generator=self.generator).to(self.device)
             total += model.fit_batch(self.optimizer, inputs[idx], targets[idx])
         self.num_updates += 1
         with torch.no_grad():  # the fit's error on a sample of the data, in the data's units
-            sample = torch.randint(self.buffer.size, (min(2048, self.buffer.size),), generator=self.generator)
+            sample = torch.randint(self.buffer.size, (min(2048, self.buffer.size),), generator=self.generator).to(self.device)
             x, y = inputs[sample], targets[sample]
             obs_size = self.observation_space.shape[0]
             next_obs, reward = model.mean_prediction(x[None, :, :obs_size].expand(mpc.ensemble_size, -1, -1),
@@ -208,7 +216,8 @@ class MPCAgent:
                    "model_reward_mse": reward_error.mean().item(), "buffer_size": float(self.buffer.size)}
         if self.value is not None:
             n, obs_size = self.buffer.size, self.observation_space.shape[0]
-            metrics |= self.value.fit(self.buffer.obs[:n], self.buffer.rewards[:n], self.buffer.next_obs[:n],
+            data = (self.buffer.obs[:n], self.buffer.rewards[:n], self.buffer.next_obs[:n])
+            metrics |= self.value.fit(*(t.to(self.device) for t in data),
                                       model.in_mean[:obs_size], model.in_std[:obs_size], self.value_optimizer,
                                       mpc.model_updates, batch, self.generator)
         return metrics
@@ -233,6 +242,8 @@ class MPCAgent:
         state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
                  "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
                  "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets}
+        if self.plan_generator is not self.generator:
+            state |= {"plan_generator": self.plan_generator.get_state(), "plan_device": self.device.type}
         if self.value is not None:
             state |= {"value": self.value.state_dict(), "value_optimizer": self.value_optimizer.state_dict()}
         return state
@@ -265,6 +276,12 @@ class MPCAgent:
             self.value_optimizer.load_state_dict(state["value_optimizer"])
         self.buffer.load_state_dict(state["buffer"])
         self.generator.set_state(state["generator"])
+        if self.plan_generator is not self.generator:
+            # a run moved between devices cannot carry the planner's stream over: start a new one
+            if state.get("plan_device") == self.device.type:
+                self.plan_generator.set_state(state["plan_generator"])
+            else:
+                self.plan_generator.manual_seed(state["seed"] + state["global_step"])
         self.seed, self.global_step, self.num_updates = state["seed"], state["global_step"], state["num_updates"]
         self._env_resets = state["env_resets"]
         self._obs = None  # the envs are not the agent's: the next collect() resets them

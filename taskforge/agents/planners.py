@@ -35,7 +35,7 @@ def plan(spec: MPCSpec, score: Score, warm: torch.Tensor, generator: torch.Gener
 
 def random_shooting(spec: MPCSpec, score: Score, warm: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
     envs, horizon, actions = warm.shape
-    candidates = torch.rand((envs, spec.population, horizon, actions), generator=generator) * 2 - 1
+    candidates = torch.rand((envs, spec.population, horizon, actions), generator=generator, device=warm.device) * 2 - 1
     best = score(candidates).argmax(dim=1)
     return candidates[torch.arange(envs), best]
 
@@ -64,7 +64,7 @@ def mppi(spec: MPCSpec, score: Score, warm: torch.Tensor, generator: torch.Gener
 
 def _around(mean: torch.Tensor, std: torch.Tensor, population: int, generator: torch.Generator) -> torch.Tensor:
     """`population` sequences per env drawn from N(mean, std), clipped to the action box."""
-    noise = torch.randn((mean.shape[0], population, *mean.shape[1:]), generator=generator)
+    noise = torch.randn((mean.shape[0], population, *mean.shape[1:]), generator=generator, device=mean.device)
     return (mean[:, None] + std[:, None] * noise).clamp(-1.0, 1.0)
 
 

@@ -1,4 +1,5 @@
-"""Vector envs the agent can train on, and torch's thread count, from `AgentSpec.runtime`."""
+"""Vector envs the agent can train on and torch's thread count, from `AgentSpec.runtime`; whether
+a torch device an agent names is present."""
 
 from __future__ import annotations
 
@@ -67,3 +68,11 @@ def torch_threads(n: int) -> Iterator[None]:
         yield
     finally:
         torch.set_num_threads(previous)
+
+
+def device_available(name: str) -> bool:
+    """Whether torch can use the device `name` (`cpu`, `cuda`, `cuda:N`) on this machine."""
+    device = torch.device(name)
+    if device.type == "cpu":
+        return True
+    return torch.cuda.is_available() and (device.index or 0) < torch.cuda.device_count()

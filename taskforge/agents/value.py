@@ -53,7 +53,7 @@ class TerminalValue(nn.Module):
         self.obs_std.copy_(std)
         total = 0.0
         for _ in range(updates):
-            idx = torch.randint(len(rewards), (batch,), generator=generator)
+            idx = torch.randint(len(rewards), (batch,), generator=generator).to(obs.device)
             with torch.no_grad():
                 target = rewards[idx] + self.discount * self(next_obs[idx], target=True)
             loss = (((self(obs[idx]) - target) / self.scale) ** 2).mean()
@@ -65,5 +65,5 @@ class TerminalValue(nn.Module):
                 for slow, fast in zip(self.target.parameters(), self.net.parameters()):
                     slow.lerp_(fast, self.tau)
         with torch.no_grad():
-            value = self(obs[torch.randint(len(rewards), (min(2048, len(rewards)),), generator=generator)]).mean().item()
+            value = self(obs[torch.randint(len(rewards), (min(2048, len(rewards)),), generator=generator).to(obs.device)]).mean().item()
         return {"value_loss": total / updates, "value_mean": value}

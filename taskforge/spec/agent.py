@@ -147,6 +147,12 @@ class MPCSpec(StrictModel):
     steps). Needs `discount` < 1."""
     value_tau: float = Field(default=0.005, gt=0.0, le=1.0)
     """Polyak rate of V's target network, per gradient step."""
+    device: str = Field(default="cpu", pattern=r"^(cpu|cuda(:[0-9]+)?)$")
+    """Where the model, the value and the planner run: `cpu`, or `cuda` / `cuda:N` for an NVIDIA
+    GPU (the transition buffer stays in host memory; each fit moves it over once). Planning is
+    ~20 small forward passes in a row per step, so a GPU pays off in the size of the search more
+    than in its latency: benchmarks/mpc_speed.py measures both. A run trained on a GPU is
+    evaluated on the CPU where none is present."""
 
     @model_validator(mode="after")
     def _consistent(self) -> MPCSpec:
