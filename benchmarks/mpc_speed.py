@@ -88,9 +88,11 @@ def main() -> None:
     parser.add_argument("--buffer", type=int, default=50_000, help="transitions in the buffer a fit reads")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    devices = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+    devices = (["cuda"] if torch.cuda.is_available() else []) + ["cpu"]  # the slow CPU rows last
     space, actions = Box(-np.inf, np.inf, (OBS,), np.float32), Box(-1.0, 1.0, (ACTIONS,), np.float32)
-    rows, records = [], []
+    gpu = torch.cuda.get_device_name() if torch.cuda.is_available() else None
+    rows: list[list] = []
+    records: list[dict] = []
     for name, spec in presets().items():
         mpc = spec.planning
         for device in devices:
@@ -110,10 +112,11 @@ def main() -> None:
                                 "ms_per_env_step_without_env": per_step, "hidden_sizes": mpc.hidden_sizes,
                                 "search": {k: getattr(mpc, k) for k in ("population", "iterations", "horizon", "particles")}})
                 rows.append([name, device, envs, call_ms, call_ms / envs, fit_ms, per_step])
+                print(f"{name} on {device}, {envs} envs: {call_ms:,.1f} ms a planning call, {fit_ms:,.0f} ms a fit", flush=True)
+                # written after every row: a run cut short keeps what it measured
+                path = write_result("mpc_speed", {"gpu": gpu, "torch_threads": args.threads, "buffer": args.buffer,
+                                                  "calls": args.calls, "versions": versions("torch"), "rows": records})
     print_table(["preset", "device", "envs", "plan ms/call", "plan ms/env step", "fit ms", "ms/env step (no env)"], rows)
-    gpu = torch.cuda.get_device_name() if torch.cuda.is_available() else None
-    path = write_result("mpc_speed", {"gpu": gpu, "torch_threads": args.threads, "buffer": args.buffer, "calls": args.calls,
-                                      "versions": versions("torch"), "rows": records})
     print(f"wrote {path}")
 
 
