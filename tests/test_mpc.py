@@ -11,7 +11,7 @@ import torch
 import yaml
 from gymnasium.spaces import Box
 
-from taskforge.agents import MPCAgent
+from taskforge.agents import MPCAgent, make_vector_env
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan
 from taskforge.agents.value import TerminalValue
@@ -152,6 +152,31 @@ def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(t
         # it plans with the loaded model before any update of its own: the held-out goals are reached
         assert start["step"] == 0 and start["eval_success_rate"] >= 0.8, start
         assert first["step"] == 400 and first["buffer_size"] == 2400.0 + 400.0  # and refits on the source's data too
+
+
+def test_the_random_first_trial_lasts_random_steps_across_fits_and_not_after_demos(tmp_path):
+    """`random_steps` 200 with a fit every 100: both first collections are random (the planner is
+    never asked), the third plans every step; an agent whose data was given (demos) plans at once."""
+    write(tmp_path, total_steps=300, mpc={"random_steps": 200, "steps_per_update": 100})
+    spec, task = load_agent_spec(tmp_path / "agent.yaml"), load_task(tmp_path / "task.yaml")
+    envs = make_vector_env([lambda: TaskEnv(task, tmp_path / "task.yaml") for _ in range(4)], spec.runtime)
+    agent = MPCAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    planned = []
+    plan_once = agent.act
+    agent.act = lambda *args, **kw: planned.append(1) or plan_once(*args, **kw)  # counts the planner's calls
+    for collection in range(3):
+        agent.collect(envs)
+        assert len(planned) == (25 if collection == 2 else 0), collection  # 100 steps / 4 envs
+        agent.update()
+    given = MPCAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    data = agent.buffer.state_dict()  # as if they were a demo episode of 200 steps
+    given.add_demonstrations(data["obs"][:200].numpy(), data["actions"][:200].numpy(), data["rewards"][:200].numpy(),
+                             np.arange(200) == 0)
+    given.update()
+    given.act = lambda *args, **kw: planned.append(1) or MPCAgent.act(given, *args, **kw)
+    given.collect(envs)
+    assert len(planned) == 25 + 25
+    envs.close()
 
 
 def test_mpc_agent_files_are_checked_like_any_other(tmp_path, capsys):

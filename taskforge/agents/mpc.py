@@ -4,8 +4,8 @@ that picks the action sequence with the highest predicted return and executes it
 
 Reading order of one training iteration (the trainer drives it like PPO: `collect`, `update`):
 
-1. `collect`: `steps_per_update` env steps. Before the first fit, uniform random actions (PETS's
-   random first trial); then the planner, warm-started from each env's previous plan shifted by
+1. `collect`: `steps_per_update` env steps. The first `random_steps` take uniform random actions
+   (PETS's random first trial; none where the data came from elsewhere); then the planner, warm-started from each env's previous plan shifted by
    one step. Every transition (observation, action, stage reward, next observation; the true last
    observation of an episode that ended, from `final_obs`) goes into the buffer.
 2. `update`: standardisation statistics refitted on the whole buffer, then `model_updates`
@@ -103,6 +103,7 @@ class MPCAgent:
         self.high = torch.as_tensor(action_space.high, dtype=torch.float32, device=self.device)
         self.global_step = 0
         self.num_updates = 0
+        self.data_given = False  # demos or another run's buffer: no random first trial
         self._obs: np.ndarray | None = None
         self._plans: torch.Tensor | None = None
         self._env_resets = 0
@@ -168,7 +169,7 @@ class MPCAgent:
         obs, plans = self._obs, self._plans
         assert plans is not None
         for _ in range(math.ceil(self.mpc.steps_per_update / envs.num_envs)):
-            if self.num_updates == 0 and self.global_step < self.mpc.random_steps:
+            if not self.data_given and self.global_step < self.mpc.random_steps:
                 unit = torch.rand((envs.num_envs, self.action_size), generator=self.generator) * 2 - 1
                 actions = self._to_env(unit)
             else:
@@ -229,6 +230,7 @@ class MPCAgent:
         starts = np.asarray(episode_starts, dtype=bool)
         keep = np.flatnonzero(~np.append(starts[1:], True))  # not an episode's last step
         self.buffer.add(observations[keep], actions[keep], rewards[keep], observations[keep + 1])
+        self.data_given = True
         return len(keep)
 
     def set_progress(self, fraction: float) -> None:
@@ -241,7 +243,8 @@ class MPCAgent:
         `torch.load(weights_only=True)`). The buffer is saved whole: a resumed run refits on it."""
         state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
                  "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
-                 "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets}
+                 "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets,
+                 "data_given": self.data_given}
         if self.plan_generator is not self.generator:
             state |= {"plan_generator": self.plan_generator.get_state(), "plan_device": self.device.type}
         if self.value is not None:
@@ -265,6 +268,7 @@ class MPCAgent:
         if len(rows) > self.buffer.capacity:
             raise WeightsMismatch(f"its {len(rows):,} transitions exceed this agent's mpc.buffer_size ({self.buffer.capacity:,})")
         self.buffer.load_state_dict(state["buffer"])
+        self.data_given = True
         if len(rows) < self.buffer.capacity:  # a larger buffer appends after the loaded rows
             self.buffer.cursor = len(rows)
 
@@ -284,4 +288,6 @@ class MPCAgent:
                 self.plan_generator.manual_seed(state["seed"] + state["global_step"])
         self.seed, self.global_step, self.num_updates = state["seed"], state["global_step"], state["num_updates"]
         self._env_resets = state["env_resets"]
+        # checkpoints from before `data_given`: their random phase ended at the first fit
+        self.data_given = state.get("data_given", self.num_updates > 0)
         self._obs = None  # the envs are not the agent's: the next collect() resets them

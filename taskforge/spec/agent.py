@@ -121,7 +121,9 @@ class MPCSpec(StrictModel):
     steps_per_update: int = Field(default=1000, ge=1)
     """Env steps (all envs together) between model fits."""
     random_steps: int = Field(default=2000, ge=0)
-    """Uniformly random actions before the first fit (PETS's random first trial)."""
+    """The first `random_steps` env steps take uniformly random actions (PETS's random first
+    trial), the model fitted every `steps_per_update` meanwhile; none where the data came from
+    elsewhere (a warm start's demos, `init_from`'s buffer)."""
     buffer_size: int = Field(default=1_000_000, ge=1000)
     planner: Literal["cem", "mppi", "random_shooting"] = "cem"
     """`random_shooting`: the best of `population` uniform sequences (as GenReL-World describes);
