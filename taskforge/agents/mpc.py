@@ -5,9 +5,10 @@ that picks the action sequence with the highest predicted return and executes it
 Reading order of one training iteration (the trainer drives it like PPO: `collect`, `update`):
 
 1. `collect`: `steps_per_update` env steps. The first `random_steps` take uniform random actions
-   (PETS's random first trial; none where the data came from elsewhere); then the planner, warm-started from each env's previous plan shifted by
-   one step. Every transition (observation, action, stage reward, next observation; the true last
-   observation of an episode that ended, from `final_obs`) goes into the buffer.
+   (PETS's random first trial; none where the data came from elsewhere); then the planner,
+   warm-started from each env's previous plan shifted by one step. Every transition
+   (observation, action, stage reward, next observation; the true last observation of an episode
+   that ended, from `final_obs`) goes into the buffer.
 2. `update`: standardisation statistics refitted on the whole buffer, then `model_updates`
    Adam steps, each member on its own bootstrap draw of `batch_size` transitions; with
    `terminal_value`, as many TD(0) steps on the value (`value.py`) that scores plans' last states.
