@@ -45,12 +45,7 @@ PETS = {"hidden_sizes": [200, 200, 200, 200], "population": 500, "elites": 50, "
 def presets() -> dict[str, AgentSpec]:
     """The shipped MPC presets, and agents/mpc_large.yaml with PETS's search."""
     small, large = load_agent_spec(ROOT / "agents/mpc.yaml"), load_agent_spec(ROOT / "agents/mpc_large.yaml")
-    pets = large.model_copy(update={"mpc": large.planning.model_copy(update=PETS)})
-    return {"agents/mpc.yaml": small, "agents/mpc_large.yaml": large, "mpc_large + PETS's search": pets}
-
-
-def on(spec: AgentSpec, device: str) -> AgentSpec:
-    return spec.model_copy(update={"mpc": spec.planning.model_copy(update={"device": device})})
+    return {"agents/mpc.yaml": small, "agents/mpc_large.yaml": large, "mpc_large + PETS's search": large.with_planning(**PETS)}
 
 
 def time_planning(agent: MPCAgent, envs: int, calls: int, seconds: float, rng: np.random.Generator) -> tuple[float, int]:
@@ -97,7 +92,7 @@ def main() -> None:
         mpc = spec.planning
         for device in devices:
             rng = np.random.default_rng(0)
-            agent = MPCAgent(on(spec, device), space, actions, seed=0)
+            agent = MPCAgent(spec.with_planning(device=device), space, actions, seed=0)
             fit_ms = time_fit(agent, args.buffer, rng)
             too_slow = False  # a bigger batch only costs more: once a call outlasts --seconds, stop
             for envs in sorted(args.envs):

@@ -203,7 +203,7 @@ def load_run(path: str | Path) -> LoadedRun:
         raise SpecError.single(checkpoint, "config", f"not the config of a taskforge run ({exc.__class__.__name__})") from None
     if agent_spec.algo == "mpc" and not device_available(agent_spec.planning.device):
         # a policy trained on a GPU is still evaluated (rendered, fine-tuned from) where there is none
-        agent_spec = agent_spec.model_copy(update={"mpc": agent_spec.planning.model_copy(update={"device": "cpu"})})
+        agent_spec = agent_spec.with_planning(device="cpu")
     agent, shapes = build_agent(agent_spec, phases, config["seed"], checkpoint, checkpoint)
     agent.load_state_dict(state["agent"])
     return LoadedRun(agent, config, shapes, checkpoint)

@@ -219,8 +219,7 @@ def test_on_a_gpu_the_agent_starts_from_the_cpu_weights_and_learns_to_reach(tmp_
     cur = write(tmp_path, total_steps=2400, mpc={"device": "cuda"})
     spec = load_agent_spec(tmp_path / "agent.yaml")
     space, actions = Box(-np.inf, np.inf, (4,), np.float32), Box(-1.0, 1.0, (2,), np.float32)
-    weights = [MPCAgent(spec.model_copy(update={"mpc": spec.planning.model_copy(update={"device": d})}), space, actions, seed=3)
-               .model.state_dict() for d in ("cpu", "cuda")]
+    weights = [MPCAgent(spec.with_planning(device=d), space, actions, seed=3).model.state_dict() for d in ("cpu", "cuda")]
     for name, tensor in weights[0].items():
         torch.testing.assert_close(weights[1][name].cpu(), tensor)
     run = train(cur, run_dir=tmp_path / "run", progress=False)

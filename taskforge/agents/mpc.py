@@ -196,7 +196,7 @@ class MPCAgent:
             return self._fit()
 
     def _fit(self) -> dict[str, float]:
-        mpc, model = self.mpc, self.model
+        mpc, model, obs_size = self.mpc, self.model, self.observation_space.shape[0]
         inputs, targets = (t.to(self.device) for t in self.buffer.inputs_and_targets())
         model.fit_normalization(inputs, targets)
         batch = min(mpc.batch_size, self.buffer.size)
@@ -209,17 +209,15 @@ class MPCAgent:
         with torch.no_grad():  # the fit's error on a sample of the data, in the data's units
             sample = torch.randint(self.buffer.size, (min(2048, self.buffer.size),), generator=self.generator).to(self.device)
             x, y = inputs[sample], targets[sample]
-            obs_size = self.observation_space.shape[0]
             next_obs, reward = model.mean_prediction(x[None, :, :obs_size].expand(mpc.ensemble_size, -1, -1),
                                                      x[None, :, obs_size:].expand(mpc.ensemble_size, -1, -1))
             obs_error = ((next_obs - x[None, :, :obs_size]) - y[None, :, :obs_size]) ** 2
             reward_error = (reward - y[None, :, obs_size]) ** 2
         metrics = {"model_nll": total / mpc.model_updates, "model_obs_mse": obs_error.mean().item(),
                    "model_reward_mse": reward_error.mean().item(), "buffer_size": float(self.buffer.size)}
-        if self.value is not None:
-            n, obs_size = self.buffer.size, self.observation_space.shape[0]
-            data = (self.buffer.obs[:n], self.buffer.rewards[:n], self.buffer.next_obs[:n])
-            metrics |= self.value.fit(*(t.to(self.device) for t in data),
+        if self.value is not None:  # obs and rewards are on the device already, in the fit's data
+            landed = self.buffer.next_obs[: self.buffer.size].to(self.device)
+            metrics |= self.value.fit(inputs[:, :obs_size], targets[:, obs_size], landed,
                                       model.in_mean[:obs_size], model.in_std[:obs_size], self.value_optimizer,
                                       mpc.model_updates, batch, self.generator)
         return metrics

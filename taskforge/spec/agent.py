@@ -7,7 +7,7 @@ implementation details of PPO (Huang et al., 2022).
 from __future__ import annotations
 
 import importlib.util
-from typing import Literal
+from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
@@ -244,3 +244,8 @@ class AgentSpec(StrictModel):
     def planning(self) -> MPCSpec:
         """The `mpc` section, or its defaults."""
         return self.mpc or MPCSpec()
+
+    def with_planning(self, **fields: Any) -> AgentSpec:
+        """A copy whose `mpc` section has `fields` changed (`device="cpu"` to evaluate a GPU run
+        on a CPU, a bigger search to time it); the values are not validated again."""
+        return self.model_copy(update={"mpc": self.planning.model_copy(update=fields)})
