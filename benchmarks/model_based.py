@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -34,13 +35,32 @@ from taskforge.run import RunDir  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "benchmarks/configs"
-VARIANTS = {name: CONFIGS / f"{name.replace('-', '_')}.yaml" for name in (
-    "mpc-reach", "ppo-reach", "mpc-push", "mpc-push-value", "mpc-push-large", "ppo-push", "mpc-pick-place", "mpc-pick-place-demos")}
-BUDGET = {"mpc-reach": 50_000, "ppo-reach": 50_000, "mpc-push": 200_000, "mpc-push-value": 200_000, "mpc-push-large": 200_000,
-          "ppo-push": 200_000, "mpc-pick-place": 1_000_000, "mpc-pick-place-demos": 100_000}
-GOAL = {"mpc-reach": 0.90, "mpc-push": 0.95, "mpc-push-value": 0.95, "mpc-push-large": 0.95,
-        "mpc-pick-place": 0.80, "mpc-pick-place-demos": 0.95}
 RUNS = ROOT / "benchmarks/runs/model_based"
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One row of the benchmark: its config (benchmarks/configs/), the task its plot panel shows,
+    its budget in env steps and issue 23's held-out goal (None for the PPO references)."""
+
+    task: str
+    budget: int
+    goal: float | None
+
+    def config(self, name: str) -> Path:
+        return CONFIGS / f"{name.replace('-', '_')}.yaml"
+
+
+VARIANTS: dict[str, Variant] = {
+    "mpc-reach": Variant("reach", 50_000, 0.90),
+    "ppo-reach": Variant("reach", 50_000, None),
+    "mpc-push": Variant("push", 200_000, 0.95),
+    "mpc-push-value": Variant("push", 200_000, 0.95),
+    "mpc-push-large": Variant("push", 200_000, 0.95),
+    "ppo-push": Variant("push", 200_000, None),
+    "mpc-pick-place": Variant("pick-place", 1_000_000, 0.80),
+    "mpc-pick-place-demos": Variant("pick-place", 100_000, 0.95),
+}
 
 
 def curve(run_dir: Path) -> list[tuple[int, float]]:
@@ -48,19 +68,39 @@ def curve(run_dir: Path) -> list[tuple[int, float]]:
     return [(m["step"], m["eval_success_rate"]) for m in RunDir(run_dir).read_metrics() if "eval_success_rate" in m]
 
 
-def task_of(variant: str) -> str:
-    """The task a variant runs (`mpc-push-value`, `mpc-push-large` -> `push`): one plot panel each."""
-    return variant.split("-", 1)[1].removesuffix("-value").removesuffix("-large")
+def summary(variant: str, seed: int, run_dir: Path) -> dict:
+    """What the table, the plot and the JSON say about one run: its curve, best and last held-out
+    success, the first evaluation at the goal and the median training wall-clock per env step."""
+    run, spec = RunDir(run_dir), VARIANTS[variant]
+    rates = [m["steps_per_s"] for m in run.read_metrics() if "steps_per_s" in m]
+    points = curve(run_dir)
+    return {
+        "variant": variant, "seed": seed, "steps_done": run.steps_done(), "budget": spec.budget, "curve": points,
+        "best": max((s for _, s in points), default=None), "end": points[-1][1] if points else None,
+        "first_at_goal": next((step for step, s in points if spec.goal is not None and s >= spec.goal), None),
+        "ms_per_env_step": 1000.0 / float(np.median(rates)) if rates else None,
+    }
+
+
+def runs_on_disk() -> dict[str, dict]:
+    """Every variant's runs that have metrics, whichever this call trained: the report (JSON, PNG)
+    is the whole benchmark, so a chunk of one run does not drop the others from it."""
+    runs = {}
+    for variant in VARIANTS:
+        for run_dir in sorted(RUNS.glob(f"{variant}-seed*"), key=lambda d: int(d.name.rsplit("seed", 1)[1])):
+            if RunDir(run_dir).metrics.exists():
+                runs[run_dir.name] = summary(variant, int(run_dir.name.rsplit("seed", 1)[1]), run_dir)
+    return runs
 
 
 def plot(runs: dict[str, dict], out: Path) -> Path:
     """One panel per task: every run's held-out success vs env steps, MPC solid, PPO dashed."""
     plt = pyplot()
-    tasks = sorted({task_of(r["variant"]) for r in runs.values()})
+    tasks = list(dict.fromkeys(VARIANTS[r["variant"]].task for r in runs.values()))
     fig, axes = plt.subplots(1, max(len(tasks), 1), figsize=(4.5 * max(len(tasks), 1), 3.5), squeeze=False)
     for ax, task in zip(axes[0], tasks):
         for name, run in runs.items():
-            if task_of(run["variant"]) == task and run["curve"]:
+            if VARIANTS[run["variant"]].task == task and run["curve"]:
                 steps, success = zip(*run["curve"])
                 ax.plot(steps, success, "-" if run["variant"].startswith("mpc") else "--", marker=".", label=name)
         ax.set_title(task)
@@ -73,36 +113,27 @@ def plot(runs: dict[str, dict], out: Path) -> Path:
 
 def main() -> None:
     parser = chunked_parser(__doc__, chunk_steps=50_000)
-    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS))
+    parser.add_argument("--variants", nargs="+", choices=list(VARIANTS), default=list(VARIANTS),
+                        help="the runs to advance (the report always covers every run on disk)")
     args = parser.parse_args()
-    runs = {}
-    for variant in args.variants:
-        for seed in args.seeds:
-            run_dir = RUNS / f"{variant}-seed{seed}"
-            if not args.report_only:
+    if not args.report_only:
+        for variant in args.variants:
+            for seed in args.seeds:
                 start = time.perf_counter()
-                step = advance_run(VARIANTS[variant], run_dir, seed, BUDGET[variant], args.chunk_steps)
-                print(f"{variant} seed {seed}: {step:,} / {BUDGET[variant]:,} steps ({time.perf_counter() - start:.0f} s this call)",
+                spec = VARIANTS[variant]
+                step = advance_run(spec.config(variant), RUNS / f"{variant}-seed{seed}", seed, spec.budget, args.chunk_steps)
+                print(f"{variant} seed {seed}: {step:,} / {spec.budget:,} steps ({time.perf_counter() - start:.0f} s this call)",
                       flush=True)
-            run = RunDir(run_dir)
-            if not run.metrics.exists():
-                continue
-            rates = [m["steps_per_s"] for m in run.read_metrics() if "steps_per_s" in m]
-            points = curve(run_dir)
-            goal = GOAL.get(variant)
-            runs[f"{variant}-seed{seed}"] = {
-                "variant": variant, "seed": seed, "steps_done": run.steps_done(), "budget": BUDGET[variant], "curve": points,
-                "best": max((s for _, s in points), default=None), "end": points[-1][1] if points else None,
-                "first_at_goal": next((step for step, s in points if goal is not None and s >= goal), None),
-                "ms_per_env_step": 1000.0 / float(np.median(rates)) if rates else None,
-            }
+    runs = runs_on_disk()
     rows = [[name, f"{r['steps_done']:,} / {r['budget']:,}", "-" if r["end"] is None else f"{r['end']:.2f}",
              "-" if r["best"] is None else f"{r['best']:.2f}",
              "-" if r["first_at_goal"] is None else f"{r['first_at_goal']:,}",
              "-" if r["ms_per_env_step"] is None else f"{r['ms_per_env_step']:.2f}"] for name, r in runs.items()]
     print_table(["run", "env steps", "held-out at the end", "best", "first at the goal", "ms per env step (train)"], rows)
     print(f"curves: {plot(runs, RESULTS / 'model_based.png')}")
-    write_result("model_based", {"variants": args.variants, "seeds": args.seeds, "budgets": BUDGET, "goals": GOAL, "runs": runs})
+    write_result("model_based", {"advanced": [] if args.report_only else args.variants, "seeds_advanced": args.seeds,
+                                 "budgets": {v: s.budget for v, s in VARIANTS.items()},
+                                 "goals": {v: s.goal for v, s in VARIANTS.items() if s.goal is not None}, "runs": runs})
 
 
 if __name__ == "__main__":
