@@ -41,9 +41,12 @@ RUNS = ROOT / "benchmarks/runs/model_based"
 @dataclass(frozen=True)
 class Variant:
     """One row of the benchmark: its config (benchmarks/configs/), the task its plot panel shows,
-    its budget in env steps and issue 23's held-out goal (None for the PPO references)."""
+    the stage its held-out success is read on (a push run evaluates `reach` until it is promoted;
+    those points are not push's curve), its budget in env steps and issue 23's held-out goal
+    (None for the PPO references)."""
 
     task: str
+    stage: str
     budget: int
     goal: float | None
 
@@ -52,20 +55,22 @@ class Variant:
 
 
 VARIANTS: dict[str, Variant] = {
-    "mpc-reach": Variant("reach", 50_000, 0.90),
-    "ppo-reach": Variant("reach", 50_000, None),
-    "mpc-push": Variant("push", 200_000, 0.95),
-    "mpc-push-value": Variant("push", 200_000, 0.95),
-    "mpc-push-large": Variant("push", 200_000, 0.95),
-    "ppo-push": Variant("push", 200_000, None),
-    "mpc-pick-place": Variant("pick-place", 1_000_000, 0.80),
-    "mpc-pick-place-demos": Variant("pick-place", 100_000, 0.95),
+    "mpc-reach": Variant("reach", "reach", 50_000, 0.90),
+    "ppo-reach": Variant("reach", "reach", 50_000, None),
+    "mpc-push": Variant("push", "push", 200_000, 0.95),
+    "mpc-push-value": Variant("push", "push", 200_000, 0.95),
+    "mpc-push-large": Variant("push", "push", 200_000, 0.95),
+    "ppo-push": Variant("push", "push", 200_000, None),
+    "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
+    "mpc-pick-place-demos": Variant("pick-place", "place", 100_000, 0.95),
 }
 
 
-def curve(run_dir: Path) -> list[tuple[int, float]]:
-    """(step, held-out success) of the run's periodic evaluations."""
-    return [(m["step"], m["eval_success_rate"]) for m in RunDir(run_dir).read_metrics() if "eval_success_rate" in m]
+def curve(run_dir: Path, stage: str) -> list[tuple[int, float]]:
+    """(step, held-out success) of the run's periodic evaluations on `stage` (an evaluation runs on
+    the stage being trained, which its metrics record names)."""
+    return [(m["step"], m["eval_success_rate"]) for m in RunDir(run_dir).read_metrics()
+            if "eval_success_rate" in m and m.get("stage") == stage]
 
 
 def summary(variant: str, seed: int, run_dir: Path) -> dict:
@@ -73,7 +78,7 @@ def summary(variant: str, seed: int, run_dir: Path) -> dict:
     success, the first evaluation at the goal and the median training wall-clock per env step."""
     run, spec = RunDir(run_dir), VARIANTS[variant]
     rates = [m["steps_per_s"] for m in run.read_metrics() if "steps_per_s" in m]
-    points = curve(run_dir)
+    points = curve(run_dir, spec.stage)
     return {
         "variant": variant, "seed": seed, "steps_done": run.steps_done(), "budget": spec.budget, "curve": points,
         "best": max((s for _, s in points), default=None), "end": points[-1][1] if points else None,
