@@ -51,6 +51,7 @@ class Variant:
     goal: float | None
 
     def config(self, name: str) -> Path:
+        """The variant's config file: its name with underscores (`mpc-push` -> `mpc_push.yaml`)."""
         return CONFIGS / f"{name.replace('-', '_')}.yaml"
 
 
