@@ -67,19 +67,19 @@ VARIANTS: dict[str, Variant] = {
 }
 
 
-def curve(run_dir: Path, stage: str) -> list[tuple[int, float]]:
-    """(step, held-out success) of the run's periodic evaluations on `stage` (an evaluation runs on
+def curve(metrics: list[dict], stage: str) -> list[tuple[int, float]]:
+    """(step, held-out success) of a run's periodic evaluations on `stage` (an evaluation runs on
     the stage being trained, which its metrics record names)."""
-    return [(m["step"], m["eval_success_rate"]) for m in RunDir(run_dir).read_metrics()
-            if "eval_success_rate" in m and m.get("stage") == stage]
+    return [(m["step"], m["eval_success_rate"]) for m in metrics if "eval_success_rate" in m and m.get("stage") == stage]
 
 
 def summary(variant: str, seed: int, run_dir: Path) -> dict:
     """What the table, the plot and the JSON say about one run: its curve, best and last held-out
     success, the first evaluation at the goal and the median training wall-clock per env step."""
     run, spec = RunDir(run_dir), VARIANTS[variant]
-    rates = [m["steps_per_s"] for m in run.read_metrics() if "steps_per_s" in m]
-    points = curve(run_dir, spec.stage)
+    metrics = run.read_metrics()
+    rates = [m["steps_per_s"] for m in metrics if "steps_per_s" in m]
+    points = curve(metrics, spec.stage)
     return {
         "variant": variant, "seed": seed, "steps_done": run.steps_done(), "budget": spec.budget, "curve": points,
         "best": max((s for _, s in points), default=None), "end": points[-1][1] if points else None,
@@ -93,9 +93,11 @@ def runs_on_disk() -> dict[str, dict]:
     is the whole benchmark, so a chunk of one run does not drop the others from it."""
     runs = {}
     for variant in VARIANTS:
-        for run_dir in sorted(RUNS.glob(f"{variant}-seed*"), key=lambda d: int(d.name.rsplit("seed", 1)[1])):
+        seeds = sorted(int(d.name.rsplit("seed", 1)[1]) for d in RUNS.glob(f"{variant}-seed*"))
+        for seed in seeds:
+            run_dir = RUNS / f"{variant}-seed{seed}"
             if RunDir(run_dir).metrics.exists():
-                runs[run_dir.name] = summary(variant, int(run_dir.name.rsplit("seed", 1)[1]), run_dir)
+                runs[run_dir.name] = summary(variant, seed, run_dir)
     return runs
 
 
