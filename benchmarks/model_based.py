@@ -12,7 +12,8 @@ Variants (benchmarks/configs/, one file each) and the goals of issue 23:
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py);
 - `mpc-pick-place-demos`: the same with 50 scripted episodes seeding the model, 100k; >= 0.95
-  within 100k (PPO with demos: benchmarks/warm_start.py).
+  within 100k (PPO with demos: benchmarks/warm_start.py); `mpc-pick-place-demos-prior` the same
+  with a policy cloned from the demos proposing plans (agents/mpc_demos.yaml).
 Each run's own evaluations (50 held-out ML1 goals) give the curve. Anchors (TD-MPC2's result
 files, 3 seeds, state observations): reach 0.63 at 100k and 0.97 at 1M; push 0.97 at 200k and
 0.90 at 1M; pick-place 0.63 at 200k and 0.83 at 1M. Runs resume in chunks like the other long
@@ -64,6 +65,7 @@ VARIANTS: dict[str, Variant] = {
     "ppo-push": Variant("push", "push", 200_000, None),
     "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-demos": Variant("pick-place", "place", 100_000, 0.95),
+    "mpc-pick-place-demos-prior": Variant("pick-place", "place", 100_000, 0.95),
 }
 
 

@@ -268,3 +268,47 @@ def test_validate_describes_the_mpc_warm_start_as_the_models_data(capsys, monkey
     [line] = [x for x in capsys.readouterr().out.splitlines() if "warm start from" in x]
     assert "seed the dynamics model's data" in line and "BC" not in line
 
+
+
+def test_a_proposal_the_model_scores_best_becomes_the_plan():
+    """Whatever the search draws, a proposal with the best return is kept: random shooting's
+    argmax returns it, and CEM whose elites are its two copies (no momentum) moves its mean onto it."""
+    target = torch.tensor([[[0.9, -0.9]] * 4, [[-0.8, 0.7]] * 4])  # 2 envs, horizon 4
+
+    def score(candidates: torch.Tensor) -> torch.Tensor:
+        return -((candidates - target[:, None]) ** 2).sum(dim=(2, 3))
+
+    proposals = torch.stack([torch.zeros(2, 4, 2), target, target], dim=1)  # a poor proposal, the best twice
+    for planner in ("random_shooting", "cem"):
+        spec = MPCSpec(planner=planner, horizon=4, population=3, elites=2, iterations=1, momentum=0.0)
+        result = plan(spec, score, torch.zeros(2, 4, 2), torch.Generator().manual_seed(0), proposals)
+        assert torch.allclose(result, target), (planner, result)
+
+
+def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resume(tmp_path, capsys):
+    """A search too weak to find the goals alone (random shooting, 2 uniform sequences) reaches
+    them right after the warm start when a policy cloned from 4 scripted episodes proposes plans;
+    without the prior the same search does not. The prior is in the checkpoint, and needs demos."""
+    weak = {"planner": "random_shooting", "population": 2, "elites": 1}
+    write(tmp_path, total_steps=400, mpc={**weak, "prior_trajectories": 3})
+    assert main(["validate", str(tmp_path / "curriculum.yaml")]) == 2
+    assert "mpc.prior_trajectories" in capsys.readouterr().err
+    task = load_task(tmp_path / "task.yaml")
+    demos = record(TaskEnv(task, tmp_path / "task.yaml", stage="reach"), StraightToGoal(), episodes=4, keep_failed=True)
+    save(demos, tmp_path / "demos.npz")
+    rarely = {"every_steps": 100_000, "episodes": 20, "split": "test"}  # evaluate after the warm start only
+    demos_warm_start = {"demos": "demos.npz", "bc_epochs": 1000}  # 80 steps of demos: 1,000 Adam steps
+    after = {}
+    for prior in (0, 3):  # the prior's files last: its run resumes from them
+        cur = write(tmp_path, total_steps=demos.num_steps + 400, mpc={**weak, "prior_trajectories": prior},
+                    warm_start=demos_warm_start, evaluation=rarely)
+        run = train(cur, run_dir=tmp_path / f"prior{prior}", progress=False)
+        first = read_jsonl(run / "metrics.jsonl")[0]
+        after[prior] = first["eval_success_rate"]
+        if prior:
+            assert first["demo_prior_bc_mse"] < 0.01, first  # the expert's straight line is cloned
+    assert after[3] >= 0.6 and after[0] <= 0.2, after  # measured 0.75 and 0.00 (4 demo goals of 20 held out)
+    state = torch.load(tmp_path / "prior3/checkpoint.pt", weights_only=True)["agent"]
+    assert "prior" in state
+    train(cur, run_dir=tmp_path / "prior3", steps=demos.num_steps + 800, resume=True, progress=False)
+    assert read_jsonl(tmp_path / "prior3/metrics.jsonl")[-1]["step"] == demos.num_steps + 800

@@ -19,6 +19,11 @@ unchanged. `act` carries each env's plan in the slot where a recurrent policy ca
 so evaluation's episode starts reset it. Termination is not modelled: every shipped stage ends by
 its time limit or on success, and a planned trajectory past success only adds reward.
 
+With `prior_trajectories`, a policy cloned from the warm start's demos (`prior.py`, MoDem's
+recipe) proposes that many sequences at every step: it is stepped through the model's mean for
+`horizon` steps from the env's observation, and its actions join each planning round's
+candidates.
+
 `mpc.device` puts the model, the value and the planner on a GPU; the buffer, the bootstrap
 draws and the random first actions stay on the CPU with `generator`, so the networks start
 from the same weights and see the same batches on either device. On a GPU the planner's and the
@@ -38,6 +43,7 @@ from gymnasium.vector import VectorEnv
 
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan, shift
+from taskforge.agents.prior import PolicyPrior
 from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
 from taskforge.agents.value import TerminalValue
 from taskforge.agents.weights import WeightsMismatch, load_matching, require
@@ -100,6 +106,9 @@ class MPCAgent:
         if self.mpc.terminal_value:
             self.value = TerminalValue(obs_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau, self.generator).to(self.device)
             self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
+        self.prior: PolicyPrior | None = None
+        if self.mpc.prior_trajectories:  # fitted by `fit_prior` at the warm start
+            self.prior = PolicyPrior(obs_size, self.action_size, self.mpc.hidden_sizes, self.generator).to(self.device)
         self.low = torch.as_tensor(action_space.low, dtype=torch.float32, device=self.device)
         self.high = torch.as_tensor(action_space.high, dtype=torch.float32, device=self.device)
         self.global_step = 0
@@ -125,8 +134,30 @@ class MPCAgent:
         if episode_start is not None:
             plans[torch.as_tensor(np.atleast_1d(episode_start), dtype=torch.bool, device=self.device)] = 0.0
         with torch.no_grad():
-            new = plan(self.mpc, self._scorer(torch.as_tensor(batch, device=self.device)), plans, self.plan_generator)
+            obs_t = torch.as_tensor(batch, device=self.device)
+            proposals = None if self.prior is None else self._proposals(obs_t)
+            new = plan(self.mpc, self._scorer(obs_t), plans, self.plan_generator, proposals)
         return self._to_env(new[:, 0]), shift(new)
+
+    def _proposals(self, obs: torch.Tensor) -> torch.Tensor:
+        """The prior's `prior_trajectories` sequences per env `[envs, k, horizon, action]`: the
+        policy stepped through the members' mean prediction from `obs`; every proposal but the
+        first has `prior_std` noise on its actions (which the next prediction then reads)."""
+        assert self.prior is not None
+        k, members = self.mpc.prior_trajectories, self.mpc.ensemble_size
+        envs = obs.shape[0]
+        state = obs.repeat_interleave(k, dim=0)  # rows: (env, proposal)
+        noise_std = torch.full((k, 1), self.mpc.prior_std, device=self.device)
+        noise_std[0] = 0.0
+        noise_std = noise_std.repeat(envs, 1)
+        steps = []
+        for _ in range(self.mpc.horizon):
+            noise = torch.randn((envs * k, self.action_size), generator=self.plan_generator, device=self.device)
+            action = (self.prior(state) + noise_std * noise).clamp(-1.0, 1.0)
+            steps.append(action)
+            rows = (state[None].expand(members, -1, -1), self._scale(action)[None].expand(members, -1, -1))
+            state = self.model.mean_prediction(*rows)[0].mean(dim=0)
+        return torch.stack(steps, dim=1).reshape(envs, k, self.mpc.horizon, self.action_size)
 
     def _scorer(self, obs: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
         """Predicted return of candidate sequences `[envs, n, horizon, action]` from `obs`
@@ -232,6 +263,17 @@ class MPCAgent:
         self.data_given = True
         return len(keep)
 
+    def fit_prior(self, observations: np.ndarray, actions: np.ndarray, epochs: int, batch_size: int,
+                  learning_rate: float) -> dict[str, float]:
+        """Clone the demos' actions (env units, mapped onto the planner's [-1, 1]) into the prior
+        (`prior.py`); its fit's error as a metric. Only with `prior_trajectories`."""
+        assert self.prior is not None
+        obs = torch.as_tensor(np.asarray(observations), dtype=torch.float32, device=self.device)
+        env_actions = torch.as_tensor(np.asarray(actions), dtype=torch.float32, device=self.device)
+        unit = (2.0 * (env_actions - self.low) / (self.high - self.low) - 1.0).clamp(-1.0, 1.0)
+        with torch_threads(update_threads(self.spec.runtime)):
+            return self.prior.fit(obs, unit, epochs, batch_size, learning_rate, self.generator)
+
     def set_progress(self, fraction: float) -> None:
         """Nothing is scheduled over the budget (PPO anneals its learning rate here)."""
 
@@ -248,6 +290,8 @@ class MPCAgent:
             state |= {"plan_generator": self.plan_generator.get_state(), "plan_device": self.device.type}
         if self.value is not None:
             state |= {"value": self.value.state_dict(), "value_optimizer": self.value_optimizer.state_dict()}
+        if self.prior is not None:
+            state["prior"] = self.prior.state_dict()
         return state
 
     def load_weights(self, state: dict) -> None:
@@ -277,6 +321,8 @@ class MPCAgent:
         if self.value is not None:
             self.value.load_state_dict(state["value"])
             self.value_optimizer.load_state_dict(state["value_optimizer"])
+        if self.prior is not None:
+            self.prior.load_state_dict(state["prior"])
         self.buffer.load_state_dict(state["buffer"])
         self.generator.set_state(state["generator"])
         if self.plan_generator is not self.generator:

@@ -149,6 +149,14 @@ class MPCSpec(StrictModel):
     steps). Needs `discount` < 1."""
     value_tau: float = Field(default=0.005, gt=0.0, le=1.0)
     """Polyak rate of V's target network, per gradient step."""
+    prior_trajectories: int = Field(default=0, ge=0)
+    """Candidates per planning round proposed by a policy cloned from the warm start's demos,
+    each its rollout through the model for `horizon` steps (MoDem, Hansen et al. 2022; TD-MPC's
+    policy-guided trajectories; agents/prior.py). They join every round's candidates, and the
+    search keeps them only where the model scores them best. 0: no prior. Needs a `warm_start`."""
+    prior_std: float = Field(default=0.1, ge=0.0)
+    """Gaussian noise on each action of the proposals after the first (which is the policy's own,
+    noise-free): the search's variations around what the demos did."""
     device: str = Field(default="cpu", pattern=r"^(cpu|cuda(:[0-9]+)?)$")
     """Where the model, the value and the planner run: `cpu`, or `cuda` / `cuda:N` for an NVIDIA
     GPU (the transition buffer stays in host memory; each fit moves it over once). Planning is

@@ -121,8 +121,9 @@ def _seed_model(
     cur: ResolvedCurriculum, ws: WarmStartSpec, agent: MPCAgent, run: RunDir, seed: int, resumed: bool, progress: bool
 ) -> WarmStart:
     """`algo: mpc`'s warm start: the demos' transitions seed the model's data and it is fitted
-    on them before the first plan (no policy to clone; the planner starts from a model that has
-    seen the task solved). A resumed run's buffer is in its checkpoint."""
+    on them before the first plan (the planner starts from a model that has seen the task
+    solved); with `mpc.prior_trajectories` they are cloned into the planner's prior too. A resumed
+    run's buffer and prior are in its checkpoint."""
     demos, generated = _demonstrations(cur, ws, run, seed, resumed, progress)
     _check_size(cur, demos, agent.observation_space.shape[0])
     if resumed:
@@ -130,6 +131,10 @@ def _seed_model(
     added = agent.add_demonstrations(demos.observations, demos.actions, demos.rewards, demos.episode_starts)
     _say(progress, f"warm start: the model is fitted on {added:,} transitions of {demos.num_episodes} demos")
     metrics = {f"demo_{k}": v for k, v in agent.update().items()}
+    if agent.prior is not None:
+        _say(progress, f"warm start: the planner's prior is cloned from them ({ws.bc_epochs} epochs)")
+        fit = agent.fit_prior(demos.observations, demos.actions, ws.bc_epochs, ws.bc_batch_size, ws.bc_learning_rate)
+        metrics |= {f"demo_{k}": v for k, v in fit.items()}
     expert_steps = int(demos.metadata.get("steps_run", demos.num_steps))
     agent.global_step += expert_steps  # the expert's steps count in the budget
     metrics.update(expert_steps=float(expert_steps), demo_transitions=float(added), bc_demo_episodes=float(demos.num_episodes))
