@@ -153,7 +153,9 @@ class MPCSpec(StrictModel):
     """Candidates per planning round proposed by a policy cloned from the warm start's demos,
     each its rollout through the model for `horizon` steps (MoDem, Hansen et al. 2022; TD-MPC's
     policy-guided trajectories; agents/prior.py). They join every round's candidates, and the
-    search keeps them only where the model scores them best. 0: no prior. Needs a `warm_start`."""
+    search starts from the first (noise-free) one instead of the previous plan: `init_std` is
+    then the trust region around what the demos do (mpc.py's doc). 0: no prior. Needs a
+    `warm_start`."""
     prior_std: float = Field(default=0.1, ge=0.0)
     """Gaussian noise on each action of the proposals after the first (which is the policy's own,
     noise-free): the search's variations around what the demos did."""
