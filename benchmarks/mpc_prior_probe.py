@@ -61,7 +61,7 @@ def main() -> None:
         sys.exit(f"error: {args.checkpoint}: not an algo: mpc run with mpc.prior_trajectories")
     phase = run.config["phases"][0]
     task, task_file = TaskSpec.model_validate(phase["task"]), phase["task_file"]
-    stage = run.config["evaluation"].get("stage") or task.stage_names[-1]
+    stage = run.config["curriculum"]["evaluation"].get("stage") or task.stage_names[-1]
     prior, spec = agent.prior, agent.mpc
 
     def success(player) -> dict:
