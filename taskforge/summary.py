@@ -126,9 +126,9 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
     if ws is not None:
         tasks = " + ".join(f"{p.task.name}:{ws.stage or p.stages[-1]}" for p in cur.warm_start_phases())
         source = str(cur.demos_file) if ws.demos else f"{ws.generate_episodes} scripted episodes of {tasks}"
-        if cur.agent.algo == "mpc":  # no policy to clone: the demos are the model's first data
+        if cur.agent.algo == "mpc":  # the demos are the model's first data (and, with a prior, a cloned policy)
             prior = cur.agent.planning.prior_trajectories
-            cloned = f"; a policy cloned from them ({ws.bc_epochs} epochs) proposes {prior} of each planning round's candidates" if prior else ""
+            cloned = f"; a policy cloned from them ({ws.bc_epochs} epochs) proposes {prior} of each planning round's candidates and the search starts from it" if prior else ""
             lines.append(f"  warm start from {source}: they seed the dynamics model's data, fitted on them before the first plan{cloned}")
         else:
             ft = ws.fine_tune
