@@ -30,7 +30,6 @@ from benchmarks.common import print_table, write_result  # noqa: E402
 from taskforge.agents import MPCAgent  # noqa: E402
 from taskforge.rollouts import evaluate_rows  # noqa: E402
 from taskforge.run import load_run  # noqa: E402
-from taskforge.spec import TaskSpec  # noqa: E402
 
 
 class PriorOnly:
@@ -59,9 +58,8 @@ def main() -> None:
     agent = run.agent
     if not isinstance(agent, MPCAgent) or agent.prior is None:
         sys.exit(f"error: {args.checkpoint}: not an algo: mpc run with mpc.prior_trajectories")
-    phase = run.config["phases"][0]
-    task, task_file = TaskSpec.model_validate(phase["task"]), phase["task_file"]
-    stage = run.config["curriculum"]["evaluation"].get("stage") or task.stage_names[-1]
+    task, task_file, stages = run.phases[-1]
+    stage = run.config["curriculum"]["evaluation"].get("stage") or stages[-1]
     prior, spec = agent.prior, agent.mpc
 
     def success(player) -> dict:

@@ -135,18 +135,22 @@ class MPCAgent:
         """Plan from each observation and return the plans' first actions in env units, and the
         plans shifted for the next step. `episode_start[i]` discards env i's previous plan. The
         search is random either way (`deterministic` is accepted for `evaluate`'s sake)."""
-        batch = np.atleast_2d(np.asarray(obs, dtype=np.float32))
-        plans = self.initial_state(len(batch)) if state is None else state.clone()
-        if episode_start is not None:
-            plans[torch.as_tensor(np.atleast_1d(episode_start), dtype=torch.bool, device=self.device)] = 0.0
+        obs_t = torch.as_tensor(np.atleast_2d(np.asarray(obs, dtype=np.float32)), device=self.device)
         with torch.no_grad():
-            obs_t = torch.as_tensor(batch, device=self.device)
-            proposals = None
             if self.prior is not None:  # the search starts from the prior's own rollout (module doc)
                 proposals = self._proposals(obs_t)
-                plans = proposals[:, 0]
-            new = plan(self.mpc, self._scorer(obs_t), plans, self.plan_generator, proposals)
+                warm = proposals[:, 0]
+            else:
+                proposals, warm = None, self._previous_plans(state, episode_start, len(obs_t))
+            new = plan(self.mpc, self._scorer(obs_t), warm, self.plan_generator, proposals)
         return self._to_env(new[:, 0]), shift(new)
+
+    def _previous_plans(self, state: torch.Tensor | None, episode_start: np.ndarray | None, num_envs: int) -> torch.Tensor:
+        """The plans carried from the last step, zeros where an episode starts (or none was carried)."""
+        plans = self.initial_state(num_envs) if state is None else state.clone()
+        if episode_start is not None:
+            plans[torch.as_tensor(np.atleast_1d(episode_start), dtype=torch.bool, device=self.device)] = 0.0
+        return plans
 
     def _proposals(self, obs: torch.Tensor) -> torch.Tensor:
         """The prior's `prior_trajectories` sequences per env `[envs, k, horizon, action]`: the
