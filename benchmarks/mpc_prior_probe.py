@@ -9,9 +9,14 @@ step), held-out success on the same goals and seeds of:
    `init_std` is how far it may stray).
 
     python benchmarks/mpc_prior_probe.py benchmarks/runs/model_based/mpc-pick-place-demos-prior-seed0/checkpoint.pt
-                                         [--trials 8] [--init-std 0.1 0.25 0.5]
+                                         [--trials 8] [--init-std 0.1 0.25 0.5] [--seed 1000]
+                                         [--players prior unguided guided] [--out mpc_prior_probe]
 
-Writes benchmarks/results/mpc_prior_probe.json.
+`--players` picks the rows (the planner without the prior costs the most: it rarely ends an
+episode early); `--seed 10000` with `--trials 50` gives a seed-0 run's own evaluation goals (the
+trainer evaluates at the run's seed + 10,000), so a row lines up with the run's curve.
+
+Writes benchmarks/results/<out>.json.
 """
 
 from __future__ import annotations
@@ -48,11 +53,17 @@ class PriorOnly:
         return self.agent._to_env(unit), state
 
 
+PLAYERS = ("prior", "unguided", "guided")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("checkpoint", type=Path)
     parser.add_argument("--trials", type=int, default=8, help="held-out goals (test split), one episode each")
     parser.add_argument("--init-std", type=float, nargs="+", default=[0.1, 0.25, 0.5])
+    parser.add_argument("--seed", type=int, default=1000, help="seed of the first trial's reset (one per trial after it)")
+    parser.add_argument("--players", nargs="+", choices=PLAYERS, default=list(PLAYERS), help="which rows to measure")
+    parser.add_argument("--out", default="mpc_prior_probe", help="results file name, without .json")
     args = parser.parse_args()
     run = load_run(args.checkpoint)
     agent = run.agent
@@ -64,20 +75,24 @@ def main() -> None:
 
     def success(player) -> dict:
         start = time.perf_counter()
-        row = evaluate_rows(player, task, task_file, [(stage, None)], "test", args.trials, seed=1000, stop_on_success=True)[0]
+        row = evaluate_rows(player, task, task_file, [(stage, None)], "test", args.trials, seed=args.seed, stop_on_success=True)[0]
         return {"success": row.success_rate, "seconds": time.perf_counter() - start}
 
-    rows = {"prior alone": success(PriorOnly(agent))}
-    agent.prior = None
-    rows[f"planner without the prior (init_std {spec.init_std:g})"] = success(agent)
-    agent.prior = prior
-    for std in args.init_std:
+    rows = {}
+    if "prior" in args.players:
+        rows["prior alone"] = success(PriorOnly(agent))
+    if "unguided" in args.players:
+        agent.prior = None
+        rows[f"planner without the prior (init_std {spec.init_std:g})"] = success(agent)
+        agent.prior = prior
+    for std in args.init_std if "guided" in args.players else []:
         agent.mpc = spec.model_copy(update={"init_std": std})
         rows[f"planner from the prior, init_std {std:g}"] = success(agent)
     print(f"{args.checkpoint} at step {agent.global_step:,}: {stage} on {args.trials} held-out goals")
     print_table(["player", "success", "seconds"], [[k, f"{v['success']:.2f}", v["seconds"]] for k, v in rows.items()])
-    payload = {"checkpoint": str(args.checkpoint), "step": agent.global_step, "stage": stage, "trials": args.trials, "rows": rows}
-    print(f"wrote {write_result('mpc_prior_probe', payload)}")
+    payload = {"checkpoint": str(args.checkpoint), "step": agent.global_step, "stage": stage, "trials": args.trials,
+               "seed": args.seed, "rows": rows}
+    print(f"wrote {write_result(args.out, payload)}")
 
 
 if __name__ == "__main__":

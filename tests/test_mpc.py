@@ -11,6 +11,8 @@ import torch
 import yaml
 from gymnasium.spaces import Box
 
+import benchmarks.common
+from benchmarks import mpc_prior_probe
 from taskforge.agents import MPCAgent, make_vector_env
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan
@@ -285,10 +287,11 @@ def test_a_proposal_the_model_scores_best_becomes_the_plan():
         assert torch.allclose(result, target), (planner, result)
 
 
-def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resume(tmp_path, capsys):
+def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resume(tmp_path, capsys, monkeypatch):
     """A search too weak to find the goals alone (random shooting, 2 uniform sequences) reaches
     them right after the warm start when a policy cloned from 4 scripted episodes proposes plans;
-    without the prior the same search does not. The prior is in the checkpoint, and needs demos."""
+    without the prior the same search does not. The prior is in the checkpoint, and needs demos;
+    the probe benchmark tells the prior's share from the search's."""
     weak = {"planner": "random_shooting", "population": 2, "elites": 1}
     write(tmp_path, total_steps=400, mpc={**weak, "prior_trajectories": 3})
     assert main(["validate", str(tmp_path / "curriculum.yaml")]) == 2
@@ -312,3 +315,14 @@ def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resu
     assert "prior" in state
     train(cur, run_dir=tmp_path / "prior3", steps=demos.num_steps + 800, resume=True, progress=False)
     assert read_jsonl(tmp_path / "prior3/metrics.jsonl")[-1]["step"] == demos.num_steps + 800
+    # benchmarks/mpc_prior_probe.py on this run: the cloned expert alone reaches the goals, the weak
+    # search without it does not; it records the rows, seed and file name it was asked for
+    monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr("sys.argv", ["mpc_prior_probe.py", str(tmp_path / "prior3/checkpoint.pt"), "--trials", "8",
+                                     "--seed", "7", "--players", "prior", "unguided", "--out", "probe"])
+    mpc_prior_probe.main()
+    result = json.loads((tmp_path / "results/probe.json").read_text())
+    rows = result["rows"]
+    assert result["seed"] == 7 and result["trials"] == 8 and len(rows) == 2, result  # no guided rows asked for
+    assert rows["prior alone"]["success"] >= 0.5, rows  # measured 0.75 (6 of 8)
+    assert rows["planner without the prior (init_std 0.5)"]["success"] <= 0.25, rows  # measured 0.00
