@@ -70,9 +70,12 @@ VARIANTS: dict[str, Variant] = {
 
 
 def curve(metrics: list[dict], stage: str) -> list[tuple[int, float]]:
-    """(step, held-out success) of a run's periodic evaluations on `stage` (an evaluation runs on
-    the stage being trained, which its metrics record names)."""
-    return [(m["step"], m["eval_success_rate"]) for m in metrics if "eval_success_rate" in m and m.get("stage") == stage]
+    """(step, held-out success) of a run's evaluations on `stage` (an evaluation runs on the stage
+    being trained, which its metrics record names). The evaluation right after pretraining named
+    no stage before the eighteenth session; such a row is on the run's first stage."""
+    first = next((m["stage"] for m in metrics if "stage" in m), None)
+    return [(m["step"], m["eval_success_rate"]) for m in metrics
+            if "eval_success_rate" in m and m.get("stage", first) == stage]
 
 
 def summary(variant: str, seed: int, run_dir: Path) -> dict:

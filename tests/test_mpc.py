@@ -12,7 +12,7 @@ import yaml
 from gymnasium.spaces import Box
 
 import benchmarks.common
-from benchmarks import mpc_prior_probe
+from benchmarks import model_based, mpc_prior_probe
 from taskforge.agents import MPCAgent, make_vector_env
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan
@@ -153,6 +153,7 @@ def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(t
         start, first = read_jsonl(continued / "metrics.jsonl")[:2]
         # it plans with the loaded model before any update of its own: the held-out goals are reached
         assert start["step"] == 0 and start["eval_success_rate"] >= 0.8, start
+        assert start["stage"] == "reach"  # a curve read per stage keeps this first point
         assert first["step"] == 400 and first["buffer_size"] == 2400.0 + 400.0  # and refits on the source's data too
 
 
@@ -258,6 +259,10 @@ def test_mpc_warm_start_seeds_the_models_data_and_refuses_dagger(tmp_path, capsy
     # every demo step with a successor in its episode is a transition; the expert's steps count
     assert metrics[0]["demo_transitions"] == demos.num_steps - demos.num_episodes
     assert metrics[0]["step"] == metrics[0]["expert_steps"] == demos.num_steps
+    # the evaluation right after the warm start names its stage: benchmarks/model_based.py reads
+    # each run's curve on its stage, and the curve starts where the demos left it
+    assert "eval_success_rate" in metrics[0] and metrics[0]["stage"] == "reach"
+    assert model_based.curve(metrics, "reach")[0] == (demos.num_steps, metrics[0]["eval_success_rate"])
     # the model was fitted on them before the first plan: no random phase, the buffer starts there
     assert metrics[1]["buffer_size"] == demos.num_steps - demos.num_episodes + 400
 

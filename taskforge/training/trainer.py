@@ -105,12 +105,12 @@ def train(
     if warm is not None:
         if warm.metrics is not None:  # evaluate right after pretraining: the curve starts where the demos left it
             results = session.evaluate()
-            warm.metrics.update(_eval_metrics(results))
+            warm.metrics.update(session.position(), **_eval_metrics(results))
             session.say(_eval_line(results, "after pretraining"))
         warm.record(run, session.logger)
     if start.state is None and cur.init_from is not None:  # the curve starts where the loaded weights stand on this curriculum
         results = session.evaluate()
-        session.logger.log(0, _eval_metrics(results))
+        session.logger.log(0, {**session.position(), **_eval_metrics(results)})
         session.say(_eval_line(results, f"from {cur.init_source(start.seed).name}"))
     session.run(until=start.total if stop_at is None else min(start.total, stop_at))
     return run.path
@@ -311,10 +311,16 @@ class _Session:
         window = self.scheduler.success_rates().get(f"{self.scheduler.phase}/{self.scheduler.stage}", 0.0)
         bar.set_postfix_str(f"stage {self.scheduler.stage}, success {window:.2f} over the window | "
                             f"last update {sps:,.0f} steps/s (collect + learn)")
-        return {"phase": self.scheduler.phase, "stage": self.scheduler.stage, "steps_per_s": sps,
+        return {**self.position(), "steps_per_s": sps,
                 **_episode_metrics(episodes), **{f"window_success/{k}": v for k, v in self.scheduler.success_rates().items()},
                 **{f"sampling/{k}": v for k, v in self.scheduler.sampling_probabilities().items()},
                 **losses}
+
+    def position(self) -> dict[str, int | str]:
+        """Where the curriculum stands, for every metrics row: the one-off evaluations (right after
+        pretraining, from `init_from`) name the stage being trained as the periodic ones do, so a
+        curve read per stage starts where the warm start left it."""
+        return {"phase": self.scheduler.phase, "stage": self.scheduler.stage}
 
     def where(self, phase: int, stage: str) -> str:
         """A stage as the console names it: with several phases, which phase's task it belongs to
