@@ -71,8 +71,9 @@ VARIANTS: dict[str, Variant] = {
 
 def curve(metrics: list[dict], stage: str) -> list[tuple[int, float]]:
     """(step, held-out success) of a run's evaluations on `stage` (an evaluation runs on the stage
-    being trained, which its metrics record names). The evaluation right after pretraining named
-    no stage before the eighteenth session; such a row is on the run's first stage."""
+    being trained, which its metrics record names). The committed pick-place runs with demos were
+    logged before the trainer named the stage of its evaluation right after pretraining; that row
+    is on the run's first stage."""
     first = next((m["stage"] for m in metrics if "stage" in m), None)
     return [(m["step"], m["eval_success_rate"]) for m in metrics
             if "eval_success_rate" in m and m.get("stage", first) == stage]
