@@ -104,14 +104,10 @@ def train(
             session.logger.event({"step": agent.global_step, "kind": "warning", "message": warning})
     if warm is not None:
         if warm.metrics is not None:  # evaluate right after pretraining: the curve starts where the demos left it
-            results = session.evaluate()
-            warm.metrics.update(session.position(), **_eval_metrics(results))
-            session.say(_eval_line(results, "after pretraining"))
+            warm.metrics.update(session.evaluation_row("after pretraining"))
         warm.record(run, session.logger)
     if start.state is None and cur.init_from is not None:  # the curve starts where the loaded weights stand on this curriculum
-        results = session.evaluate()
-        session.logger.log(0, {**session.position(), **_eval_metrics(results)})
-        session.say(_eval_line(results, f"from {cur.init_source(start.seed).name}"))
+        session.logger.log(0, session.evaluation_row(f"from {cur.init_source(start.seed).name}"))
     session.run(until=start.total if stop_at is None else min(start.total, stop_at))
     return run.path
 
@@ -317,10 +313,16 @@ class _Session:
                 **losses}
 
     def position(self) -> dict[str, int | str]:
-        """Where the curriculum stands, for every metrics row: the one-off evaluations (right after
-        pretraining, from `init_from`) name the stage being trained as the periodic ones do, so a
-        curve read per stage starts where the warm start left it."""
+        """Where the curriculum stands, named in every metrics row."""
         return {"phase": self.scheduler.phase, "stage": self.scheduler.stage}
+
+    def evaluation_row(self, when: str) -> dict[str, Any]:
+        """A one-off evaluation (right after pretraining, from `init_from`), said on the console and
+        returned as a metrics row that names the stage being trained as the periodic rows do, so a
+        curve read per stage starts where the warm start or the loaded weights left it."""
+        results = self.evaluate()
+        self.say(_eval_line(results, when))
+        return {**self.position(), **_eval_metrics(results)}
 
     def where(self, phase: int, stage: str) -> str:
         """A stage as the console names it: with several phases, which phase's task it belongs to
