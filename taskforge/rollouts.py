@@ -50,7 +50,9 @@ def _rate(successes: np.ndarray) -> dict:
 
 @dataclass
 class StageResult:
-    """Outcomes of `trials` trials of `trial_episodes` episodes: arrays `[trial, episode]`."""
+    """Outcomes of `trials` trials of `trial_episodes` episodes: arrays `[trial, episode]`, in the
+    order the trials ended, with each trial's goal index and reset seed (`goals`, `seeds`; empty
+    where a caller built the result without them)."""
 
     task: str
     stage: str
@@ -59,6 +61,8 @@ class StageResult:
     successes: list[list[bool]] = field(default_factory=list)
     returns: list[list[float]] = field(default_factory=list)
     lengths: list[list[int]] = field(default_factory=list)
+    goals: list[int] = field(default_factory=list)
+    seeds: list[int] = field(default_factory=list)
 
     @property
     def trials(self) -> int:
@@ -100,7 +104,24 @@ class StageResult:
         }
         if self.trial_episodes > 1:
             row["after_first_episode"] = _after_first_episode(successes)
+        if self.goals:
+            row |= self._by_goal()
         return row
+
+    def _by_goal(self) -> dict:
+        """Which goals a trial never succeeded on (`missed_goals`) and every trial's goal, reset
+        seed and episode outcomes (`per_trial`, by seed).
+
+        Why: a success rate says how often, not where. Whether two agents (a planner and the
+        prior it starts from, say) fail on the same goals, or whether misses share a place on the
+        table, can only be read from the goals themselves; with the seed, any one trial can be
+        replayed (`taskforge eval --seed`, trial n resets with seed + n)."""
+        trials = sorted(zip(self.seeds, self.goals, self.successes, self.returns, self.lengths))
+        return {
+            "missed_goals": sorted({goal for _, goal, successes, _, _ in trials if not any(successes)}),
+            "per_trial": [{"seed": seed, "goal": goal, "successes": successes, "returns": returns, "lengths": lengths}
+                          for seed, goal, successes, returns, lengths in trials],
+        }
 
 
 def _after_first_episode(successes: np.ndarray) -> dict[str, dict]:
@@ -210,12 +231,13 @@ def _trials(
     num_goals = envs[0].unwrapped.backend.num_goals(split)
     result = StageResult(sub_task or task_name, stage, split, k)
     queue = list(range(trials))
+    playing = [0] * len(envs)  # the trial each env plays
     active = [True] * len(envs)
     obs = np.zeros((len(envs), envs[0].observation_space.shape[0]), dtype=np.float32)
     starts = np.ones(len(envs), dtype=bool)
 
     def start(i: int) -> None:
-        n = queue.pop(0)
+        n = playing[i] = queue.pop(0)
         options = {"stage": stage, "task": sub_task, "goal_index": n % num_goals}
         obs[i], _ = envs[i].reset(seed=seed + n, options=options)
         starts[i] = True  # a fresh recurrent state for every trial
@@ -236,6 +258,8 @@ def _trials(
                 result.successes.append(info["trial_successes"].tolist())
                 result.returns.append(info["trial_returns"].tolist())
                 result.lengths.append(info["trial_lengths"].tolist())
+                result.goals.append(playing[i] % num_goals)
+                result.seeds.append(seed + playing[i])
                 if queue:
                     start(i)
                 else:

@@ -457,3 +457,36 @@ def test_evaluating_sub_tasks_in_turn_on_shared_envs_matches_each_alone():
     assert [r.task for r in rows] == ["reach-v3", "window-open-v3"]
     assert rows[1].returns == alone.returns and rows[1].lengths == alone.lengths
     assert rows[0].returns != rows[1].returns
+
+
+def test_an_evaluation_records_each_trials_goal_and_seed_with_its_own_outcome(tmp_path, capsys):
+    """Trials end out of order when episodes end at success: the per-goal record must pair each
+    outcome with the trial that played it (replaying trial n alone gives its row), and name the
+    goals that no episode reached (printed by `taskforge eval` under its table)."""
+    upright = {"name": "upright", "rewards": [{"term": "native"}],
+               "success": {"all": [{"feature": "native_reward", "above": -1.0}]}}
+    task_file = tmp_path / "task.yaml"
+    task_file.write_text(yaml.safe_dump({**TASK, "stages": [upright]}))
+    task = load_task(task_file)
+    agent = PPOAgent(agent_spec(policy={"hidden_sizes": [32, 32]}, ppo=SMALL_PPO, runtime={"vector": "sync"}),
+                     Box(-np.inf, np.inf, (3,), np.float32), Box(-1.0, 1.0, (1,), np.float32), seed=0)
+    result = evaluate(agent, task, task_file, "upright", "test", 12, seed=40, parallel=3, stop_on_success=True)
+    lengths = [length for (length,) in result.lengths]
+    assert len(set(lengths)) > 2 and lengths != sorted(lengths)  # trials did end out of order
+    row = result.as_dict()
+    trials = row["per_trial"]
+    assert [t["seed"] for t in trials] == list(range(40, 52))
+    assert [t["goal"] for t in trials] == [n % 10 for n in range(12)]  # 10 test goals, then round again
+    for n in (0, 5, 11):
+        alone = evaluate(agent, task, task_file, "upright", "test", n + 1, seed=40, parallel=1, stop_on_success=True)
+        replay = alone.as_dict()["per_trial"][-1]
+        # a batch of one rounds the policy's matmuls differently from a batch of three
+        assert replay["returns"] == pytest.approx(trials[n]["returns"], rel=1e-6)
+        assert {**replay, "returns": None} == {**trials[n], "returns": None}
+    missed = sorted({t["goal"] for t in trials if not any(t["successes"])})
+    assert row["missed_goals"] == missed and 0 < len(missed) < 10
+    assert row["successes"] == sum(t["successes"][0] for t in trials)
+
+    from taskforge.evaluation.report import format_table
+    table = format_table({"checkpoint": "run", "step": 0, "split": "test", "trial_episodes": 1, "rows": [row]})
+    assert table.splitlines()[-1] == f"missed goals, pendulum-two-stage upright: {', '.join(map(str, missed))}"

@@ -61,7 +61,8 @@ def after_a_miss(after_first_episode: dict[str, dict] | None) -> str:
 def format_table(report: dict[str, Any]) -> str:
     """One row per (task, stage); with trials of K > 1 episodes, also the success of episode 1
     and episode K of the trials (the two ends of the adaptation curve) and the success of
-    episodes 2..K after a first episode that failed (what searching elsewhere gains)."""
+    episodes 2..K after a first episode that failed (what searching elsewhere gains). Under the
+    table, each row's goals (indices into the split) on which no episode of a trial succeeded."""
     k = report["trial_episodes"]
     header = ["task", "stage", "success", "95% CI"]
     header += ["episode 1", f"episode {k}", "later, after a miss"] if k > 1 else []
@@ -82,4 +83,6 @@ def format_table(report: dict[str, Any]) -> str:
     out.append("  ".join(h.ljust(w) for h, w in zip(header, widths)))
     out.append("  ".join("-" * w for w in widths))
     out += ["  ".join(c.ljust(w) for c, w in zip(row, widths)) for row in lines]
+    out += [f"missed goals, {r['task']} {r['stage']}: {', '.join(map(str, r['missed_goals']))}"
+            for r in report["rows"] if r.get("missed_goals")]
     return "\n".join(out)
