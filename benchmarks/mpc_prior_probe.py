@@ -14,7 +14,10 @@ step), held-out success on the same goals and seeds of:
 
 `--players` picks the rows (the planner without the prior costs the most: it rarely ends an
 episode early); `--seed 10000` with `--trials 50` gives a seed-0 run's own evaluation goals (the
-trainer evaluates at the run's seed + 10,000), so a row lines up with the run's curve.
+trainer evaluates at the run's seed + 10,000), so a row lines up with the run's curve, and
+`guided` at the run's own `init_std` is the run's planner. Each row names the goals it missed
+(indices into the test split), so whether the planner fails where its prior fails is read goal
+by goal.
 
 Writes benchmarks/results/<out>.json.
 """
@@ -27,7 +30,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -47,10 +49,7 @@ class PriorOnly:
         return getattr(self.agent, name)
 
     def act(self, obs: np.ndarray, state=None, episode_start=None, deterministic: bool = True):
-        assert self.agent.prior is not None
-        with torch.no_grad():
-            unit = self.agent.prior(torch.as_tensor(np.atleast_2d(obs), dtype=torch.float32, device=self.agent.device))
-        return self.agent._to_env(unit), state
+        return self.agent.prior_act(obs), state
 
 
 PLAYERS = ("prior", "unguided", "guided")
@@ -76,7 +75,8 @@ def main() -> None:
     def success(player) -> dict:
         start = time.perf_counter()
         row = evaluate_rows(player, task, task_file, [(stage, None)], "test", args.trials, seed=args.seed, stop_on_success=True)[0]
-        return {"success": row.success_rate, "seconds": time.perf_counter() - start}
+        return {"success": row.success_rate, "seconds": time.perf_counter() - start,
+                "missed_goals": row.as_dict()["missed_goals"]}
 
     rows = {}
     if "prior" in args.players:
@@ -89,7 +89,8 @@ def main() -> None:
         agent.mpc = spec.model_copy(update={"init_std": std})
         rows[f"planner from the prior, init_std {std:g}"] = success(agent)
     print(f"{args.checkpoint} at step {agent.global_step:,}: {stage} on {args.trials} held-out goals")
-    print_table(["player", "success", "seconds"], [[k, f"{v['success']:.2f}", v["seconds"]] for k, v in rows.items()])
+    print_table(["player", "success", "seconds", "missed goals"],
+                [[k, f"{v['success']:.2f}", v["seconds"], ", ".join(map(str, v["missed_goals"])) or "-"] for k, v in rows.items()])
     payload = {"checkpoint": str(args.checkpoint), "step": agent.global_step, "stage": stage, "trials": args.trials,
                "seed": args.seed, "rows": rows}
     print(f"wrote {write_result(args.out, payload)}")

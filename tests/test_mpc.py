@@ -318,6 +318,8 @@ def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resu
     assert after[3] >= 0.6 and after[0] <= 0.2, after  # measured 0.75 and 0.00 (4 demo goals of 20 held out)
     state = torch.load(tmp_path / "prior3/checkpoint.pt", weights_only=True)["agent"]
     assert "prior" in state
+    with pytest.raises(ValueError, match="no prior"):
+        load_run(tmp_path / "prior0/checkpoint.pt").agent.prior_act(demos.observations[:1])
     train(cur, run_dir=tmp_path / "prior3", steps=demos.num_steps + 800, resume=True, progress=False)
     assert read_jsonl(tmp_path / "prior3/metrics.jsonl")[-1]["step"] == demos.num_steps + 800
     # benchmarks/mpc_prior_probe.py on this run: the cloned expert alone reaches the goals, the weak
@@ -331,3 +333,5 @@ def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resu
     assert result["seed"] == 7 and result["trials"] == 8 and len(rows) == 2, result  # no guided rows asked for
     assert rows["prior alone"]["success"] >= 0.5, rows  # measured 0.75 (6 of 8)
     assert rows["planner without the prior (init_std 0.5)"]["success"] <= 0.25, rows  # measured 0.00
+    for row in rows.values():  # 8 trials on 8 distinct goals of 20: a miss is a missed goal
+        assert len(row["missed_goals"]) == round(8 * (1 - row["success"])) and set(row["missed_goals"]) <= set(range(8))

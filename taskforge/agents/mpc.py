@@ -145,6 +145,17 @@ class MPCAgent:
             new = plan(self.mpc, self._scorer(obs_t), warm, self.plan_generator, proposals)
         return self._to_env(new[:, 0]), shift(new)
 
+    def prior_act(self, obs: np.ndarray) -> np.ndarray:
+        """The cloned prior's action for each observation, in env units, without any search.
+
+        Why public: what the planner adds is measured against what its prior does alone on the
+        same goals (`benchmarks/mpc_prior_probe.py`)."""
+        if self.prior is None:
+            raise ValueError("this agent has no prior: its preset sets no mpc.prior_trajectories")
+        with torch.no_grad():
+            unit = self.prior(torch.as_tensor(np.atleast_2d(np.asarray(obs, dtype=np.float32)), device=self.device))
+        return self._to_env(unit)
+
     def _previous_plans(self, state: torch.Tensor | None, episode_start: np.ndarray | None, num_envs: int) -> torch.Tensor:
         """The plans carried from the last step, zeros where an episode starts (or none was carried)."""
         plans = self.initial_state(num_envs) if state is None else state.clone()
