@@ -22,6 +22,7 @@ from gymnasium.spaces import Box
 from taskforge.agents import PPOAgent
 from taskforge.cli import main
 from taskforge.envs import load_task
+from taskforge.evaluation.report import format_table
 from taskforge.rollouts import evaluate, evaluate_rows
 from taskforge.run import load_checkpoint, read_jsonl, save_checkpoint
 from taskforge.training import train
@@ -487,6 +488,5 @@ def test_an_evaluation_records_each_trials_goal_and_seed_with_its_own_outcome(tm
     assert row["missed_goals"] == missed and 0 < len(missed) < 10
     assert row["successes"] == sum(t["successes"][0] for t in trials)
 
-    from taskforge.evaluation.report import format_table
     table = format_table({"checkpoint": "run", "step": 0, "split": "test", "trial_episodes": 1, "rows": [row]})
     assert table.splitlines()[-1] == f"missed goals, pendulum-two-stage upright: {', '.join(map(str, missed))}"
