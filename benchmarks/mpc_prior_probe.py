@@ -76,7 +76,7 @@ def main() -> None:
         start = time.perf_counter()
         row = evaluate_rows(player, task, task_file, [(stage, None)], "test", args.trials, seed=args.seed, stop_on_success=True)[0]
         return {"success": row.success_rate, "seconds": time.perf_counter() - start,
-                "missed_goals": row.as_dict()["missed_goals"]}
+                "missed_goals": row.missed_goals}
 
     rows = {}
     if "prior" in args.players:

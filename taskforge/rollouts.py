@@ -74,6 +74,11 @@ class StageResult:
         return float(np.mean(self.successes)) if self.successes else 0.0
 
     @property
+    def missed_goals(self) -> list[int]:
+        """The goals (indices into the split) of the trials in which no episode succeeded."""
+        return sorted({goal for goal, successes in zip(self.goals, self.successes) if not any(successes)})
+
+    @property
     def mean_return(self) -> float:
         return float(np.mean(self.returns)) if self.returns else 0.0
 
@@ -109,8 +114,8 @@ class StageResult:
         return row
 
     def _by_goal(self) -> dict:
-        """Which goals a trial never succeeded on (`missed_goals`) and every trial's goal, reset
-        seed and episode outcomes (`per_trial`, by seed).
+        """`missed_goals` and every trial's goal, reset seed and episode outcomes (`per_trial`, by
+        seed).
 
         Why: a success rate says how often, not where. Whether two agents (a planner and the
         prior it starts from, say) fail on the same goals, or whether misses share a place on the
@@ -118,7 +123,7 @@ class StageResult:
         replayed (`taskforge eval --seed`, trial n resets with seed + n)."""
         trials = sorted(zip(self.seeds, self.goals, self.successes, self.returns, self.lengths))
         return {
-            "missed_goals": sorted({goal for _, goal, successes, _, _ in trials if not any(successes)}),
+            "missed_goals": self.missed_goals,
             "per_trial": [{"seed": seed, "goal": goal, "successes": successes, "returns": returns, "lengths": lengths}
                           for seed, goal, successes, returns, lengths in trials],
         }
