@@ -12,13 +12,14 @@ import yaml
 from gymnasium.spaces import Box
 
 import benchmarks.common
-from benchmarks import model_based, mpc_prior_probe
+from benchmarks import model_based, mpc_data_probe, mpc_prior_probe
 from taskforge.agents import MPCAgent, make_vector_env
 from taskforge.agents.dynamics import DynamicsEnsemble
+from taskforge.agents.mpc import TransitionBuffer
 from taskforge.agents.planners import plan
 from taskforge.agents.value import TerminalValue
 from taskforge.cli import main
-from taskforge.demos import record, save
+from taskforge.demos import generate, record, save
 from taskforge.envs import TaskEnv, load_task
 from taskforge.run import load_run, read_jsonl
 from taskforge.spec import AgentSpec, load_agent_spec
@@ -335,3 +336,39 @@ def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resu
     assert rows["planner without the prior (init_std 0.5)"]["success"] <= 0.25, rows  # measured 0.00
     for row in rows.values():  # 8 trials on 8 distinct goals of 20: a miss is a missed goal
         assert len(row["missed_goals"]) == round(8 * (1 - row["success"])) and set(row["missed_goals"]) <= set(range(8))
+
+
+def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_buffer_oldest_first(tmp_path, capsys, monkeypatch):
+    """benchmarks/mpc_data_probe.py on a real push run warm-started from Meta-World's scripted
+    pushes: the demos (the buffer's first rows) move the puck toward the goal in most of the steps
+    that move it, the untrained planner's steps after them do not; a task without `goal - object`
+    features is a one-line error. A full buffer is read from the row its cursor overwrites next."""
+    ring = TransitionBuffer(capacity=3, obs_size=1, action_size=1)
+    ring.add(*(np.arange(5.0)[:, None],) * 2, np.zeros(5), np.arange(5.0)[:, None])
+    assert ring.obs[ring.oldest_first(), 0].tolist() == [2.0, 3.0, 4.0]
+
+    push = ROOT / "tasks/metaworld/push.yaml"
+    demos = generate(push, stage="push", episodes=2, seed=3)
+    save(demos, tmp_path / "demos.npz")
+    agent = {**AGENT, "mpc": {**AGENT["mpc"], "hidden_sizes": [32, 32], "model_updates": 20}}
+    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
+    doc = {"name": "push-probe", "agent": "agent.yaml", "total_steps": demos.num_steps + 400,
+           "phases": [{"task": str(push), "stages": ["push"]}], "warm_start": {"demos": "demos.npz"},
+           "evaluation": {"every_steps": 100_000, "episodes": 1, "split": "test"}, "checkpoint": {"every_steps": 100_000}}
+    (tmp_path / "curriculum.yaml").write_text(yaml.safe_dump(doc))
+    run = train(tmp_path / "curriculum.yaml", run_dir=tmp_path / "run", progress=False)
+    transitions = demos.num_steps - demos.num_episodes
+    monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(run / "final.pt"), "--window", str(transitions), "--out", "probe"])
+    mpc_data_probe.main()
+    (result,) = json.loads((tmp_path / "results/probe.json").read_text())["runs"].values()
+    expert, planned = result["windows"]
+    assert (expert["from"], expert["to"], planned["to"]) == (0, transitions, transitions + 400), result
+    assert expert["toward_goal"] >= 20 and expert["toward_goal"] >= 0.6 * expert["moved"], expert
+    assert planned["toward_goal"] <= 0.25 * expert["toward_goal"], result
+
+    point = write(tmp_path, total_steps=400)  # the point-mass task: no object, no `goal - object`
+    train(point, run_dir=tmp_path / "point", progress=False)
+    monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(tmp_path / "point/final.pt")])
+    with pytest.raises(SystemExit, match="observation.relative_positions: true"):
+        mpc_data_probe.main()

@@ -76,6 +76,12 @@ class TransitionBuffer:
             self.cursor = (i + 1) % self.capacity
             self.size = min(self.size + 1, self.capacity)
 
+    def oldest_first(self) -> torch.Tensor:
+        """Row indices of the filled part in the order they were collected: once the buffer is
+        full, the oldest row is the one the cursor overwrites next."""
+        rows = torch.arange(self.size)
+        return torch.roll(rows, -self.cursor) if self.size == self.capacity else rows
+
     def inputs_and_targets(self, idx: torch.Tensor | slice = slice(None)) -> tuple[torch.Tensor, torch.Tensor]:
         """(obs, action) and (next_obs - obs, reward) of the rows `idx` (of the filled part)."""
         obs, act = self.obs[: self.size][idx], self.actions[: self.size][idx]
