@@ -372,3 +372,28 @@ def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_bu
     monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(tmp_path / "point/final.pt")])
     with pytest.raises(SystemExit, match="observation.relative_positions: true"):
         mpc_data_probe.main()
+
+
+def test_optimism_plans_toward_what_the_model_has_not_seen_and_pessimism_away_from_it(tmp_path):
+    """A model fitted only on actions that move left (x velocity <= 0), every reward 0: its
+    members agree on the left and disagree on the right. With `optimism` the planner's first
+    actions go right, into what the data lacks; with pessimism they stay left. (The members' mean
+    alone happens to lean right here too, 0.47 measured, so optimism is compared with pessimism.)
+    Without a second particle there is no spread to weigh: a one-line error."""
+    rng = np.random.default_rng(0)
+    obs = np.zeros((1000, 4), dtype=np.float32)
+    actions = rng.uniform(-1.0, 1.0, (1000, 2)).astype(np.float32)
+    actions[:, 0] = -np.abs(actions[:, 0])
+    for t in range(1, 1000):  # episodes of 50 steps from the origin, moving 5 cm per unit action
+        obs[t] = 0.0 if t % 50 == 0 else obs[t - 1] + np.r_[0.05 * actions[t - 1], 0.0, 0.0]
+    space, action_space = Box(-np.inf, np.inf, (4,), np.float32), Box(-1.0, 1.0, (2,), np.float32)
+    first = {}
+    for optimism in (2.0, -2.0):
+        (tmp_path / "agent.yaml").write_text(yaml.safe_dump({**AGENT, "mpc": {**AGENT["mpc"], "optimism": optimism}}))
+        agent = MPCAgent(load_agent_spec(tmp_path / "agent.yaml"), space, action_space, seed=0)
+        agent.add_demonstrations(obs, actions, np.zeros(1000, dtype=np.float32), np.arange(1000) % 50 == 0)
+        agent.update()
+        first[optimism] = agent.act(np.zeros((16, 4), dtype=np.float32), deterministic=True)[0][:, 0].mean()
+    assert first[2.0] > 0.3 and first[-2.0] < -0.2, first  # measured 0.49 and -0.28
+    with pytest.raises(ValueError, match="'optimism' .* needs 'particles' >= 2"):
+        MPCSpec(optimism=1.0, ensemble_size=1, particles=1)

@@ -193,7 +193,8 @@ class MPCAgent:
         """Predicted return of candidate sequences `[envs, n, horizon, action]` from `obs`
         `[envs, obs]`: `particles` rollouts each, particle p through member p mod members for the
         whole horizon (TS-inf), rewards discounted and summed, plus the discounted terminal
-        value of each particle's last state (`terminal_value`), particles averaged."""
+        value of each particle's last state (`terminal_value`); the particles' mean, plus
+        `optimism` times their std."""
         members, per_member = self.mpc.ensemble_size, self.mpc.particles // self.mpc.ensemble_size
 
         def score(candidates: torch.Tensor) -> torch.Tensor:
@@ -208,7 +209,10 @@ class MPCAgent:
                 total += self.mpc.discount**t * reward
             if self.value is not None:
                 total += self.mpc.discount**horizon * self.value(state)
-            return total.reshape(members, envs, n, per_member).mean(dim=(0, 3))
+            returns = total.reshape(members, envs, n, per_member).permute(1, 2, 0, 3).reshape(envs, n, members * per_member)
+            if self.mpc.optimism:  # optimism in the face of the members' disagreement (MPCSpec.optimism)
+                return returns.mean(dim=-1) + self.mpc.optimism * returns.std(dim=-1)
+            return returns.mean(dim=-1)
 
         return score
 

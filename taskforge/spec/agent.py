@@ -136,6 +136,13 @@ class MPCSpec(StrictModel):
     particles: int = Field(default=5, ge=1)
     """Rollouts per candidate sequence, particle p through ensemble member p mod ensemble_size
     for the whole horizon (PETS's TS-inf); the candidate's score is their mean return."""
+    optimism: float = 0.0
+    """Weight of the spread of a candidate's particle returns in its score: mean + optimism x
+    std. > 0 favours sequences whose outcome the members disagree on (optimism in the face of
+    uncertainty: on a contact task, touching the object, which the model has seen least); < 0
+    avoids them (the pessimism of offline model-based RL). Why: on push, a seed whose early
+    search rarely pushed the puck toward the goal never took off (benchmarks/RESULTS.md,
+    benchmarks/mpc_data_probe.py). 0: PETS's mean. Needs `particles` >= 2."""
     init_std: float = Field(default=0.5, gt=0.0)
     """The sampling distribution's std (actions in [-1, 1]) at each step's first iteration."""
     momentum: float = Field(default=0.1, ge=0.0, lt=1.0)
@@ -173,6 +180,8 @@ class MPCSpec(StrictModel):
             raise ValueError("'terminal_value' needs 'discount' < 1 (e.g. 0.99): a value sums the rewards it discounts")
         if self.elites > self.population:
             raise ValueError(f"'elites' ({self.elites}) must be <= 'population' ({self.population})")
+        if self.optimism and self.particles < 2:
+            raise ValueError(f"'optimism' ({self.optimism:g}) needs 'particles' >= 2: it weighs the spread of their returns")
         if self.particles % self.ensemble_size:
             raise ValueError(f"'particles' ({self.particles}) must be a multiple of 'ensemble_size' ({self.ensemble_size}): "
                              "each member carries as many particles")
