@@ -338,7 +338,7 @@ def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resu
         assert len(row["missed_goals"]) == round(8 * (1 - row["success"])) and set(row["missed_goals"]) <= set(range(8))
 
 
-def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_buffer_oldest_first(tmp_path, capsys, monkeypatch):
+def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_buffer_oldest_first(tmp_path, monkeypatch):
     """benchmarks/mpc_data_probe.py on a real push run warm-started from Meta-World's scripted
     pushes: the demos (the buffer's first rows) move the puck toward the goal in most of the steps
     that move it, the untrained planner's steps after them do not; a task without `goal - object`

@@ -139,10 +139,11 @@ class MPCSpec(StrictModel):
     optimism: float = 0.0
     """Weight of the spread of a candidate's particle returns in its score: mean + optimism x
     std. > 0 favours sequences whose outcome the members disagree on (optimism in the face of
-    uncertainty: on a contact task, touching the object, which the model has seen least); < 0
-    avoids them (the pessimism of offline model-based RL). Why: on push, a seed whose early
-    search rarely pushed the puck toward the goal never took off (benchmarks/RESULTS.md,
-    benchmarks/mpc_data_probe.py). 0: PETS's mean. Needs `particles` >= 2."""
+    uncertainty); < 0 avoids them (the pessimism of offline model-based RL). Why it exists: on
+    push, a seed whose early search rarely pushed the puck toward the goal never took off, and
+    optimism was the hope of sending the search to contact; measured, it did not, since the
+    members disagree most away from the puck (benchmarks/RESULTS.md). 0: PETS's mean. Needs
+    `particles` >= 2."""
     init_std: float = Field(default=0.5, gt=0.0)
     """The sampling distribution's std (actions in [-1, 1]) at each step's first iteration."""
     momentum: float = Field(default=0.1, ge=0.0, lt=1.0)
