@@ -365,7 +365,7 @@ def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_bu
     expert, planned = result["windows"]
     assert (expert["from"], expert["to"], planned["to"]) == (0, transitions, transitions + 400), result
     assert expert["toward_goal"] >= 20 and expert["toward_goal"] >= 0.6 * expert["moved"], expert
-    assert planned["toward_goal"] <= 0.25 * expert["toward_goal"], result
+    assert planned["toward_goal"] <= 0.25 * expert["toward_goal"], result  # measured: 55 of 58 moves, then 0 of 1
 
     point = write(tmp_path, total_steps=400)  # the point-mass task: no object, no `goal - object`
     train(point, run_dir=tmp_path / "point", progress=False)
