@@ -135,7 +135,8 @@ class MPCSpec(StrictModel):
     iterations: int = Field(default=4, ge=1)
     particles: int = Field(default=5, ge=1)
     """Rollouts per candidate sequence, particle p through ensemble member p mod ensemble_size
-    for the whole horizon (PETS's TS-inf); the candidate's score is their mean return."""
+    for the whole horizon (PETS's TS-inf); the candidate's score is their mean return (plus
+    `optimism` x their std)."""
     optimism: float = 0.0
     """Weight of the spread of a candidate's particle returns in its score: mean + optimism x
     std. > 0 favours sequences whose outcome the members disagree on (optimism in the face of
