@@ -33,6 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, versions, write_result  # noqa: E402
 from taskforge.agents import MPCAgent  # noqa: E402
+from taskforge.agents.mpc import UNTAGGED  # noqa: E402
 from taskforge.spec import AgentSpec, load_agent_spec  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -67,7 +68,8 @@ def time_planning(agent: MPCAgent, envs: int, calls: int, seconds: float, rng: n
 def time_fit(agent: MPCAgent, transitions: int, rng: np.random.Generator) -> float:
     """ms of one `update` (the model's fit, and the value's) on `transitions` random transitions."""
     obs = rng.uniform(-1, 1, (transitions, OBS)).astype(np.float32)
-    agent.buffer.add(obs, rng.uniform(-1, 1, (transitions, ACTIONS)), rng.normal(size=transitions), obs + 0.01 * rng.normal(size=obs.shape))
+    agent.buffer.add(obs, rng.uniform(-1, 1, (transitions, ACTIONS)), rng.normal(size=transitions), obs + 0.01 * rng.normal(size=obs.shape),
+                     np.full(transitions, UNTAGGED))
     agent.update()  # warm-up (kernels, allocator)
     start = time.perf_counter()
     agent.update()  # ends in `.item()`s: synchronised

@@ -158,6 +158,55 @@ def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(t
         assert first["step"] == 400 and first["buffer_size"] == 2400.0 + 400.0  # and refits on the source's data too
 
 
+def test_after_a_promotion_the_reward_and_the_value_learn_from_the_new_stage_alone(tmp_path):
+    """A curriculum changes the reward, not the motion. A first stage pays for moving away from
+    the goal (promoted by its 1,200-step budget), the next for reaching it: the first stage's rows
+    carry the opposite reward on the same states. The agent's reward, predicted on those rows
+    after the promotion, is the reach stage's (learnt from every row it is not: it follows the
+    rows' own labels), and the planner heads for the goal from those states. The
+    stage tags survive a checkpoint, map by name onto another agent (`init_from`), and a
+    checkpoint without them loads with every row counted."""
+    away = {"name": "away", "rewards": [{"term": "tcp_to_goal", "weight": -1.0, "params": {"kernel": "negative"}}],
+            "success": {"all": [{"feature": "tcp_to_goal_distance", "above": 10.0}]}}  # never: its budget promotes it
+    cur = write(tmp_path, total_steps=2800, promotion={"max_steps": 1200},
+                evaluation={"every_steps": 100_000, "episodes": 20, "split": "test"})
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [away, *TASK["stages"]]}))
+    run = train(cur, run_dir=tmp_path / "run", progress=False)
+    metrics = read_jsonl(run / "metrics.jsonl")
+    assert metrics[-1]["stage"] == "reach"
+    assert metrics[-1]["reward_rows"] < metrics[-1]["buffer_size"]  # the away stage's rows are left out
+
+    agent = load_run(run / "final.pt").agent
+    assert agent.stage_names == ["away", "reach"] and agent.stage == 1
+    old = agent.buffer.rows_of(0)
+    assert len(old) >= 1000
+    x, _ = agent.buffer.inputs_and_targets(old)
+    members = agent.model.members
+    _, predicted = agent.model.mean_prediction(x[None, :, :4].expand(members, -1, -1), x[None, :, 4:].expand(members, -1, -1))
+    # recorded: +distance (away's reward); predicted: the reach stage's -distance on the same states
+    recorded = agent.buffer.rewards[old]
+    # measured: correlation -0.99 and 0.11 off; fitted on every row, +0.41 and 2.2 off
+    assert torch.corrcoef(torch.stack([predicted.mean(dim=0), recorded]))[0, 1] < -0.9
+    assert (predicted.mean(dim=0) + recorded).abs().mean() < 0.25
+    # and the planner heads for the goal from where the away stage went (cosine of the first
+    # action with goal - position; measured 0.89, and -0.47 with the reward fitted on every row)
+    obs = agent.buffer.obs[old[:: len(old) // 64]].numpy()
+    action, _ = agent.act(obs)
+    toward = obs[:, 2:] - obs[:, :2]
+    assert ((action * toward).sum(axis=1) / np.linalg.norm(action, axis=1) / np.linalg.norm(toward, axis=1)).mean() > 0.6
+
+    state = agent.state_dict()
+    other = MPCAgent(agent.spec, agent.observation_space, agent.action_space, seed=0)
+    other.add_demonstrations(np.zeros((3, 4), np.float32), np.zeros((3, 2), np.float32), np.zeros(3, np.float32), np.arange(3) == 0, "reach")
+    other.load_weights(state)  # its names: reach first, then away
+    assert other.stage_names == ["reach", "away"] and len(other.buffer.rows_of(1)) == len(old)
+    for key in ("stage_names", "stage"):
+        del state[key]
+    del state["buffer"]["stages"]
+    other.load_state_dict(state)  # a checkpoint from before the tags
+    assert other.stage is None and len(other.buffer.rows_of(None)) == len(other.buffer.rows_of(0)) == agent.buffer.size
+
+
 def test_the_random_first_trial_lasts_random_steps_across_fits_and_not_after_demos(tmp_path):
     """`random_steps` 200 with a fit every 100: both first collections are random (the planner is
     never asked), the third plans every step; an agent whose data was given (demos) plans at once."""
@@ -175,7 +224,7 @@ def test_the_random_first_trial_lasts_random_steps_across_fits_and_not_after_dem
     given = MPCAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
     data = agent.buffer.state_dict()  # as if they were a demo episode of 200 steps
     given.add_demonstrations(data["obs"][:200].numpy(), data["actions"][:200].numpy(), data["rewards"][:200].numpy(),
-                             np.arange(200) == 0)
+                             np.arange(200) == 0, "reach")
     given.update()
     given.act = lambda *args, **kw: planned.append(1) or MPCAgent.act(given, *args, **kw)
     given.collect(envs)
@@ -344,8 +393,9 @@ def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_bu
     that move it, the untrained planner's steps after them do not; a task without `goal - object`
     features is a one-line error. A full buffer is read from the row its cursor overwrites next."""
     ring = TransitionBuffer(capacity=3, obs_size=1, action_size=1)
-    ring.add(*(np.arange(5.0)[:, None],) * 2, np.zeros(5), np.arange(5.0)[:, None])
+    ring.add(*(np.arange(5.0)[:, None],) * 2, np.zeros(5), np.arange(5.0)[:, None], np.arange(5))
     assert ring.obs[ring.oldest_first(), 0].tolist() == [2.0, 3.0, 4.0]
+    assert ring.stages[ring.oldest_first()].tolist() == [2, 3, 4]  # each row keeps its own stage
 
     push = ROOT / "tasks/metaworld/push.yaml"
     demos = generate(push, stage="push", episodes=2, seed=3)
@@ -391,7 +441,7 @@ def test_optimism_plans_toward_what_the_model_has_not_seen_and_pessimism_away_fr
     for optimism in (2.0, -2.0):
         (tmp_path / "agent.yaml").write_text(yaml.safe_dump({**AGENT, "mpc": {**AGENT["mpc"], "optimism": optimism}}))
         agent = MPCAgent(load_agent_spec(tmp_path / "agent.yaml"), space, action_space, seed=0)
-        agent.add_demonstrations(obs, actions, np.zeros(1000, dtype=np.float32), np.arange(1000) % 50 == 0)
+        agent.add_demonstrations(obs, actions, np.zeros(1000, dtype=np.float32), np.arange(1000) % 50 == 0, "reach")
         agent.update()
         first[optimism] = agent.act(np.zeros((16, 4), dtype=np.float32), deterministic=True)[0][:, 0].mean()
     assert first[2.0] > 0.3 and first[-2.0] < -0.2, first  # measured 0.49 and -0.28

@@ -11,7 +11,8 @@ implementation's (mbrl-lib) unless said otherwise:
 * **Predict the change of the observation**, not the next one: most of an observation stays put
   in one step, and a network near zero output fits that at once.
 * **Standardised inputs and targets**, statistics fitted on the whole buffer before each fit:
-  positions (metres) and rewards (tens) then train at one step size.
+  positions (metres) and rewards (tens) then train at one step size. The reward's on the rows it
+  learns from: in a curriculum, the stage being trained's (`MPCAgent`).
 * **The reward has a network of its own, fitted by squared error** (a departure: PETS was given
   the reward function; taskforge's stage reward reads features the observation need not contain,
   so it is learnt). Sharing the trunk with the observation's likelihood failed: where the motion
@@ -86,34 +87,49 @@ class DynamicsEnsemble(nn.Module):
             self.register_buffer(f"{name}_mean", torch.zeros(size))
             self.register_buffer(f"{name}_std", torch.ones(size))
 
-    def fit_normalization(self, inputs: torch.Tensor, targets: torch.Tensor) -> None:
+    def fit_normalization(self, inputs: torch.Tensor, targets: torch.Tensor, rewards: torch.Tensor | None = None) -> None:
         """Standardise with the statistics of all the data (a floor on the std keeps a constant
-        input, such as a hidden goal's zeros, from dividing by zero)."""
+        input, such as a hidden goal's zeros, from dividing by zero); the reward's with those of
+        `rewards` where the reward learns from only some of the rows (`loss`)."""
         for name, data in (("in", inputs), ("out", targets)):
             getattr(self, f"{name}_mean").copy_(data.mean(dim=0))
             getattr(self, f"{name}_std").copy_(data.std(dim=0).clamp_min(1e-6))
+        if rewards is not None and len(rewards) > 1:
+            self.out_mean[-1], self.out_std[-1] = rewards.mean(), rewards.std().clamp_min(1e-6)
 
     def forward(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """Standardised `[members, n, obs + action]` -> the standardised observation change's
         mean and log-variance (`[members, n, obs]` each) and the standardised reward `[members, n]`."""
+        mean, logvar = self._change(inputs)
+        return mean, logvar, run_mlp(self.reward, inputs)[..., 0]
+
+    def _change(self, inputs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         mean, logvar = run_mlp(self.dynamics, inputs).chunk(2, dim=-1)
         logvar = self.max_logvar - F.softplus(self.max_logvar - logvar)  # soft bounds (module doc)
         logvar = self.min_logvar + F.softplus(logvar - self.min_logvar)
-        return mean, logvar, run_mlp(self.reward, inputs)[..., 0]
+        return mean, logvar
 
-    def loss(self, inputs: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    def loss(self, inputs: torch.Tensor, targets: torch.Tensor,
+             reward_batch: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
         """For raw `targets` (`[members, n, obs + 1]`: observation change, reward): the Gaussian
         negative log-likelihood of the change, summed over dimensions, plus the reward's squared
         error, each averaged over members and samples; plus PETS's 0.01 penalty on the
-        log-variance bounds."""
-        mean, logvar, reward = self((inputs - self.in_mean) / self.in_std)
-        target = (targets - self.out_mean) / self.out_std
-        nll = (((mean - target[..., :-1]) ** 2) * torch.exp(-logvar) + logvar).sum(dim=-1).mean()
-        return nll + ((reward - target[..., -1]) ** 2).mean() + 0.01 * (self.max_logvar.sum() - self.min_logvar.sum())
+        log-variance bounds. `reward_batch` (raw inputs `[members, m, obs + action]`, rewards
+        `[members, m]`): the reward's own rows, where it learns from other rows than the motion
+        (the stage being trained's, `MPCAgent`); otherwise `targets`' last column."""
+        x = (inputs - self.in_mean) / self.in_std
+        mean, logvar = self._change(x)
+        target = (targets[..., :-1] - self.out_mean[:-1]) / self.out_std[:-1]
+        nll = (((mean - target) ** 2) * torch.exp(-logvar) + logvar).sum(dim=-1).mean()
+        reward_x, rewards = (x, targets[..., -1]) if reward_batch is None else ((reward_batch[0] - self.in_mean) / self.in_std, reward_batch[1])
+        reward = run_mlp(self.reward, reward_x)[..., 0]
+        reward_error = ((reward - (rewards - self.out_mean[-1]) / self.out_std[-1]) ** 2).mean()
+        return nll + reward_error + 0.01 * (self.max_logvar.sum() - self.min_logvar.sum())
 
-    def fit_batch(self, optimizer: torch.optim.Optimizer, inputs: torch.Tensor, targets: torch.Tensor) -> float:
+    def fit_batch(self, optimizer: torch.optim.Optimizer, inputs: torch.Tensor, targets: torch.Tensor,
+                  reward_batch: tuple[torch.Tensor, torch.Tensor] | None = None) -> float:
         """One Adam step on `loss` for `[members, batch, ...]` raw inputs and targets; the loss."""
-        loss = self.loss(inputs, targets)
+        loss = self.loss(inputs, targets, reward_batch)
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()

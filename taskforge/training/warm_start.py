@@ -128,7 +128,10 @@ def _seed_model(
     _check_size(cur, demos, agent.observation_space.shape[0])
     if resumed:
         return WarmStart(demos, generated, None)
-    added = agent.add_demonstrations(demos.observations, demos.actions, demos.rewards, demos.episode_starts)
+    stage = ws.stage or demos.metadata.get("stage") or cur.warm_start_phases()[0].stages[-1]
+    if ", " in stage:  # `phase: all` over phases whose last stages differ
+        raise SpecError.single(cur.file, "warm_start.stage", f"one stage for algo mpc's demos (their rewards are that stage's), not several ({stage})")
+    added = agent.add_demonstrations(demos.observations, demos.actions, demos.rewards, demos.episode_starts, stage)
     _say(progress, f"warm start: the model is fitted on {added:,} transitions of {demos.num_episodes} demos")
     metrics = {f"demo_{k}": v for k, v in agent.update().items()}
     if agent.prior is not None:
