@@ -10,7 +10,8 @@ Variants (benchmarks/configs/, one file each) and the goals of issue 23:
   a terminal value at the plan's end (agents/mpc_value.yaml), `mpc-push-large` with that value and
   a 3 x 256 ensemble (agents/mpc_large.yaml), `mpc-push-optimism` that scoring plans with one
   std of optimism about the ensemble's disagreement (agents/mpc_optimistic.yaml), `mpc-push-only`
-  the large preset on the push stage alone, without reach before it;
+  the large preset on the push stage alone, without reach before it, `mpc-push-demos` that with
+  10 scripted pushes seeding the model's data;
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py);
 - `mpc-pick-place-demos`: the same with 50 scripted episodes seeding the model, 100k; >= 0.95
@@ -66,6 +67,7 @@ VARIANTS: dict[str, Variant] = {
     "mpc-push-large": Variant("push", "push", 200_000, 0.95),
     "mpc-push-optimism": Variant("push", "push", 200_000, 0.95),
     "mpc-push-only": Variant("push", "push", 200_000, 0.95),
+    "mpc-push-demos": Variant("push", "push", 200_000, 0.95),
     "ppo-push": Variant("push", "push", 200_000, None),
     "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-demos": Variant("pick-place", "place", 100_000, 0.95),
