@@ -158,7 +158,7 @@ def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(t
         assert first["step"] == 400 and first["buffer_size"] == 2400.0 + 400.0  # and refits on the source's data too
 
 
-def test_after_a_promotion_the_reward_and_the_value_learn_from_the_new_stage_alone(tmp_path):
+def test_after_a_promotion_the_reward_learns_from_the_new_stage_alone(tmp_path):
     """A curriculum changes the reward, not the motion. A first stage pays for moving away from
     the goal (promoted by its 1,200-step budget), the next for reaching it: the first stage's rows
     carry the opposite reward on the same states. The agent's reward, predicted on those rows
