@@ -65,6 +65,14 @@ OnStep = Callable[[np.ndarray, np.ndarray, np.ndarray, dict], None]
 UNTAGGED = -1  # a transition whose stage is not known (`TransitionBuffer`)
 
 
+def _stage_of(info: dict, i: int) -> str | None:
+    """Env i's `stage` in a vector env's info (gymnasium masks each key by `_<key>`); None where
+    it names none (a plain gymnasium env)."""
+    if "stage" not in info or not info.get("_stage", np.ones(i + 1, bool))[i]:
+        return None
+    return str(info["stage"][i])
+
+
 class TransitionBuffer:
     """The model's data: the last `capacity` transitions, oldest overwritten first, each tagged
     with the stage whose reward it carries (an index into the agent's `stage_names`; -1: none
@@ -290,17 +298,18 @@ class MPCAgent:
         env that names none (a plain gymnasium env)."""
         tags = np.full(len(ended), UNTAGGED, dtype=np.int16)
         for i, over in enumerate(ended):
-            source = infos.get("final_info", {}) if over else infos
-            if "stage" in source and source.get("_stage", np.ones(i + 1, bool))[i]:
-                tags[i] = self._tag(str(source["stage"][i]))
+            stage = _stage_of(infos.get("final_info", {}) if over else infos, i)
+            if stage is not None:
+                tags[i] = self._tag(stage)
         return tags
 
     def _follow_stage(self, infos: dict, started: np.ndarray) -> None:
         """The stage being trained is that of the latest episode started that is not a replay of
         an earlier stage: after a promotion every worker's next episode is the new stage's."""
         for i in np.flatnonzero(started):
-            if "stage" in infos and infos.get("_stage", np.ones(i + 1, bool))[i] and not bool(infos.get("replay", np.zeros(i + 1, bool))[i]):
-                self.stage = self._tag(str(infos["stage"][i]))
+            stage = _stage_of(infos, i)
+            if stage is not None and not bool(infos.get("replay", np.zeros(i + 1, bool))[i]):
+                self.stage = self._tag(stage)
 
     def update(self) -> dict[str, float]:
         """Fit the model on the buffer (module doc, 2.); its losses as metrics."""

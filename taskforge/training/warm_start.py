@@ -128,7 +128,7 @@ def _seed_model(
     _check_size(cur, demos, agent.observation_space.shape[0])
     if resumed:
         return WarmStart(demos, generated, None)
-    stage = ws.stage or demos.metadata.get("stage") or cur.warm_start_phases()[0].stages[-1]
+    stage = _demo_stage(ws, demos.metadata.get("stage"), cur.warm_start_phases()[0])
     if ", " in stage:  # `phase: all` over phases whose last stages differ
         raise SpecError.single(cur.file, "warm_start.stage", f"one stage for algo mpc's demos (their rewards are that stage's), not several ({stage})")
     added = agent.add_demonstrations(demos.observations, demos.actions, demos.rewards, demos.episode_starts, stage)
@@ -232,6 +232,12 @@ def _set_exploration(agent: PPOAgent, ws: WarmStartSpec, data: Labelled) -> None
         agent.policy.actor_logstd.data.fill_(math.log(float(ft.exploration_std)))
 
 
+def _demo_stage(ws: WarmStartSpec, recorded: str | None, phase) -> str:
+    """The stage the demos are of: the warm start's `stage`, else the one a demos file was
+    recorded on, else the phase's last."""
+    return ws.stage or recorded or phase.stages[-1]
+
+
 def _labelled_env(phase, stage: str, privileged: bool) -> ExpertLabels:
     """One DAgger worker env: the warm-start stage on the train goals, labelled by the expert."""
     return ExpertLabels(TaskEnv(phase.task, phase.task_file, stage=stage, split="train", privileged=privileged), stage)
@@ -244,7 +250,7 @@ def _run_dagger(
     """DAgger's rounds; each round's student success (overall and per sub-task) goes into `metrics`."""
     phases = cur.warm_start_phases()
     fns = [  # env i plays phase i mod the number of phases
-        partial(_labelled_env, phase, ws.stage or recorded or phase.stages[-1], agent.privileged_dim > 0)
+        partial(_labelled_env, phase, _demo_stage(ws, recorded, phase), agent.privileged_dim > 0)
         for phase in (phases[i % len(phases)] for i in range(agent.spec.ppo.num_envs))
     ]
     envs = make_vector_env(fns, agent.spec.runtime)
