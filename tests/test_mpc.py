@@ -207,6 +207,34 @@ def test_after_a_promotion_the_reward_learns_from_the_new_stage_alone(tmp_path):
     assert other.stage is None and len(other.buffer.rows_of(None)) == len(other.buffer.rows_of(0)) == agent.buffer.size
 
 
+def test_the_terminal_value_learns_from_the_stage_being_trained_alone():
+    """The value, like the reward, fits the stage being trained's rows. The same random walks of
+    a point mass are in the buffer twice: as the reach stage's episodes (reward: minus the
+    distance to the goal) and as an earlier stage's that paid for the distance itself. Trained
+    on reach, the value ranks those states as reach does, by closeness to the goal; fitted on
+    every row, the two rewards cancel on the same states and it ranks them by nothing."""
+    rng = np.random.default_rng(0)
+    episodes, length = 40, 50
+    goal = rng.uniform(-1, 1, (episodes, 1, 2))
+    steps = rng.uniform(-1, 1, (episodes, length, 2))
+    position = np.clip(rng.uniform(-1, 1, (episodes, 1, 2)) + 0.05 * np.cumsum(steps, axis=1), -1.5, 1.5)
+    obs = np.concatenate([position, np.broadcast_to(goal, position.shape)], axis=2).reshape(-1, 4).astype(np.float32)
+    distance = np.linalg.norm(obs[:, :2] - obs[:, 2:], axis=1).astype(np.float32)
+    starts = np.arange(len(obs)) % length == 0
+    spec = AgentSpec.model_validate({"name": "v", "algo": "mpc", "mpc": {
+        "ensemble_size": 2, "hidden_sizes": [32, 32], "particles": 2, "discount": 0.9, "terminal_value": True,
+        "model_updates": 400, "value_tau": 0.05}})
+    agent = MPCAgent(spec, Box(-np.inf, np.inf, (4,), np.float32), Box(-1.0, 1.0, (2,), np.float32), seed=0)
+    agent.add_demonstrations(obs, steps.reshape(-1, 2).astype(np.float32), -distance, starts, "reach")  # the stage trained
+    agent.add_demonstrations(obs, steps.reshape(-1, 2).astype(np.float32), distance, starts, "away")
+    metrics = agent.update()
+    assert metrics["reward_rows"] == metrics["buffer_size"] / 2
+    with torch.no_grad():
+        value = agent.value(torch.as_tensor(obs))
+    # measured: correlation with -distance 0.99; with the value fitted on every row, 0.30
+    assert torch.corrcoef(torch.stack([value, -torch.as_tensor(distance)]))[0, 1] > 0.8
+
+
 def test_the_random_first_trial_lasts_random_steps_across_fits_and_not_after_demos(tmp_path):
     """`random_steps` 200 with a fit every 100: both first collections are random (the planner is
     never asked), the third plans every step; an agent whose data was given (demos) plans at once."""
@@ -315,6 +343,22 @@ def test_mpc_warm_start_seeds_the_models_data_and_refuses_dagger(tmp_path, capsy
     assert model_based.curve(metrics, "reach")[0] == (demos.num_steps, metrics[0]["eval_success_rate"])
     # the model was fitted on them before the first plan: no random phase, the buffer starts there
     assert metrics[1]["buffer_size"] == demos.num_steps - demos.num_episodes + 400
+
+
+def test_an_mpc_warm_start_over_phases_that_end_in_different_stages_must_name_one(tmp_path, capsys):
+    """The demos' rewards train one stage's reward, so `phase: all` over phases whose last stages
+    differ is refused before anything runs, naming the stages; naming one is accepted."""
+    away = {"name": "away", "rewards": [{"term": "tcp_to_goal", "weight": -1.0, "params": {"kernel": "negative"}}],
+            "success": {"all": [{"feature": "tcp_to_goal_distance", "above": 10.0}]}}
+    phases = [{"task": "task.yaml", "stages": ["away"]}, {"task": "task.yaml", "stages": ["reach"]}]
+    cur = write(tmp_path, total_steps=800, phases=phases, warm_start={"generate_episodes": 2, "phase": "all"})
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [away, *TASK["stages"]]}))
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "warm_start.stage" in err and "(away, reach)" in err, err
+    assert not (tmp_path / "run").exists()
+    cur.write_text(cur.read_text().replace("phase: all", "phase: all\n  stage: reach"))
+    assert main(["validate", str(cur)]) == 0
 
 
 def test_validate_describes_the_mpc_warm_start_as_the_models_data(capsys, monkeypatch):

@@ -181,6 +181,11 @@ def _check_warm_start(
     if agent.algo == "mpc" and ws.dagger.rounds > 0:
         msg = f"algo: mpc has no policy to clone, so no DAgger student; expected 0 (got {ws.dagger.rounds}): its demos seed the model's data"
         issues.append(SpecIssue(str(path), "warm_start.dagger.rounds", msg))
+    if agent.algo == "mpc" and ws.phase == "all" and ws.stage is None and len({p.stages[-1] for p in phases}) > 1:
+        # the demos' rewards train the model's reward on one stage's rows (taskforge/agents/mpc.py)
+        last = ", ".join(dict.fromkeys(p.stages[-1] for p in phases))
+        msg = f"algo: mpc's demos are one stage's (their rewards train that stage's reward), but phase: all ends in several ({last}); name one"
+        issues.append(SpecIssue(str(path), "warm_start.stage", msg))
     if ws.phase != "all" and ws.phase >= len(phases):
         msg = f"no phase {ws.phase}; expected an index below {len(phases)} (phases counts from 0) or 'all'"
         issues.append(SpecIssue(str(path), "warm_start.phase", msg))
