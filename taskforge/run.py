@@ -31,7 +31,7 @@ from typing import Any
 import torch
 
 from taskforge.agents import Agent, agent_observation_space, make_agent
-from taskforge.agents.runtime import device_available
+from taskforge.agents.runtime import device_available, flush_denormals
 from taskforge.atomic import atomic_write
 from taskforge.envs import PhaseShapes, probe_phases
 from taskforge.spec import AgentSpec, SpecError, TaskSpec
@@ -204,6 +204,7 @@ def load_run(path: str | Path) -> LoadedRun:
     if agent_spec.algo == "mpc" and not device_available(agent_spec.planning.device):
         # a policy trained on a GPU is still evaluated (rendered, fine-tuned from) where there is none
         agent_spec = agent_spec.with_planning(device="cpu")
+    flush_denormals()  # before the agent's first tensor op (an evaluation plans as slowly as training)
     agent, shapes = build_agent(agent_spec, phases, config["seed"], checkpoint, checkpoint)
     agent.load_state_dict(state["agent"])
     return LoadedRun(agent, config, shapes, checkpoint)

@@ -7,6 +7,8 @@ wrappers serve as the reference.
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 
 import gymnasium
 import numpy as np
@@ -347,6 +349,28 @@ def test_set_progress_anneals_learning_rate_linearly():
 def test_set_torch_threads_follows_the_runtime_spec():
     set_torch_threads(agent_spec(runtime={"torch_threads": 2}).runtime)
     assert torch.get_num_threads() == 2
+
+
+FLUSH_PROBE = """
+import torch
+from taskforge.agents import set_torch_threads
+from taskforge.spec.agent import RuntimeSpec
+if {configure}:
+    set_torch_threads(RuntimeSpec(torch_threads=2))
+torch.set_num_threads(2)
+tiny = torch.full((1 << 20,), 1e-39)  # denormal; the multiply below is split between both threads
+print(int((tiny * 1.0 != 0).sum()))
+"""
+
+
+@pytest.mark.parametrize("configure", [True, False], ids=["set_torch_threads", "untouched"])
+def test_set_torch_threads_flushes_denormals_in_every_thread_torch_starts(configure):
+    """Denormal weights slow an Intel CPU's multiplies ~10x (`flush_denormals`). In a fresh process
+    (the flag is per thread, inherited when torch starts its workers), a 2-thread multiply of
+    denormals is all zeros after `set_torch_threads`; untouched, every element survives (the
+    control: the probe sees the flag)."""
+    probe = subprocess.run([sys.executable, "-c", FLUSH_PROBE.format(configure=configure)], capture_output=True, text=True, check=True)
+    assert int(probe.stdout) == (0 if configure else 1 << 20)
 
 
 def test_construction_is_seeded_and_leaves_the_global_rng_alone():
