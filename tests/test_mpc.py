@@ -107,6 +107,9 @@ TASK = {
                 "rewards": [{"term": "tcp_to_goal", "weight": 1.0, "params": {"kernel": "negative"}}],
                 "success": {"all": [{"feature": "tcp_to_goal_distance", "below": 0.1}]}}],
 }
+# a stage before reach that pays for moving away from the goal, never succeeding (a budget promotes it)
+AWAY = {"name": "away", "rewards": [{"term": "tcp_to_goal", "weight": -1.0, "params": {"kernel": "negative"}}],
+        "success": {"all": [{"feature": "tcp_to_goal_distance", "above": 10.0}]}}
 AGENT = {
     "base": str(ROOT / "agents/mpc.yaml"), "name": "mpc-small",
     "mpc": {"hidden_sizes": [64, 64], "steps_per_update": 400, "model_updates": 150, "random_steps": 400},
@@ -167,11 +170,9 @@ def test_after_a_promotion_the_reward_learns_from_the_new_stage_alone(tmp_path):
     rows' own labels), and the planner heads for the goal from those states. The
     stage tags survive a checkpoint, map by name onto another agent (`init_from`), and a
     checkpoint without them loads with every row counted."""
-    away = {"name": "away", "rewards": [{"term": "tcp_to_goal", "weight": -1.0, "params": {"kernel": "negative"}}],
-            "success": {"all": [{"feature": "tcp_to_goal_distance", "above": 10.0}]}}  # never: its budget promotes it
     cur = write(tmp_path, total_steps=2800, promotion={"max_steps": 1200},
                 evaluation={"every_steps": 100_000, "episodes": 20, "split": "test"})
-    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [away, *TASK["stages"]]}))
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [AWAY, *TASK["stages"]]}))
     run = train(cur, run_dir=tmp_path / "run", progress=False)
     metrics = read_jsonl(run / "metrics.jsonl")
     assert metrics[-1]["stage"] == "reach"
@@ -226,8 +227,9 @@ def test_the_terminal_value_learns_from_the_stage_being_trained_alone():
         "ensemble_size": 2, "hidden_sizes": [32, 32], "particles": 2, "discount": 0.9, "terminal_value": True,
         "model_updates": 400, "value_tau": 0.05}})
     agent = MPCAgent(spec, Box(-np.inf, np.inf, (4,), np.float32), Box(-1.0, 1.0, (2,), np.float32), seed=0)
-    agent.add_demonstrations(obs, steps.reshape(-1, 2).astype(np.float32), -distance, starts, "reach")  # the stage trained
-    agent.add_demonstrations(obs, steps.reshape(-1, 2).astype(np.float32), distance, starts, "away")
+    actions = steps.reshape(-1, 2).astype(np.float32)
+    agent.add_demonstrations(obs, actions, -distance, starts, "reach")  # the stage trained
+    agent.add_demonstrations(obs, actions, distance, starts, "away")
     metrics = agent.update()
     assert metrics["reward_rows"] == metrics["buffer_size"] / 2
     with torch.no_grad():
@@ -349,11 +351,9 @@ def test_mpc_warm_start_seeds_the_models_data_and_refuses_dagger(tmp_path, capsy
 def test_an_mpc_warm_start_over_phases_that_end_in_different_stages_must_name_one(tmp_path, capsys):
     """The demos' rewards train one stage's reward, so `phase: all` over phases whose last stages
     differ is refused before anything runs, naming the stages; naming one is accepted."""
-    away = {"name": "away", "rewards": [{"term": "tcp_to_goal", "weight": -1.0, "params": {"kernel": "negative"}}],
-            "success": {"all": [{"feature": "tcp_to_goal_distance", "above": 10.0}]}}
     phases = [{"task": "task.yaml", "stages": ["away"]}, {"task": "task.yaml", "stages": ["reach"]}]
     cur = write(tmp_path, total_steps=800, phases=phases, warm_start={"generate_episodes": 2, "phase": "all"})
-    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [away, *TASK["stages"]]}))
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [AWAY, *TASK["stages"]]}))
     assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "warm_start.stage" in err and "(away, reach)" in err, err
