@@ -19,7 +19,7 @@ from taskforge.agents.mpc import TransitionBuffer
 from taskforge.agents.planners import plan
 from taskforge.agents.value import TerminalValue
 from taskforge.cli import main
-from taskforge.demos import generate, record, save
+from taskforge.demos import concatenate, generate, record, save
 from taskforge.envs import TaskEnv, load_task
 from taskforge.run import load_run, read_jsonl
 from taskforge.spec import AgentSpec, load_agent_spec
@@ -360,6 +360,21 @@ def test_an_mpc_warm_start_over_phases_that_end_in_different_stages_must_name_on
     assert not (tmp_path / "run").exists()
     cur.write_text(cur.read_text().replace("phase: all", "phase: all\n  stage: reach"))
     assert main(["validate", str(cur)]) == 0
+
+
+def test_an_mpc_warm_start_from_a_demos_file_recorded_over_several_stages_is_refused(tmp_path, capsys):
+    """A demos file can hold several stages (recorded with `phase: all`), which `validate` cannot
+    see: `train` refuses it in one line at `warm_start.stage`, naming them, and leaves the file be."""
+    cur = write(tmp_path, total_steps=800, warm_start={"demos": "demos.npz"})
+    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [AWAY, *TASK["stages"]]}))
+    task = load_task(tmp_path / "task.yaml")
+    parts = [record(TaskEnv(task, tmp_path / "task.yaml", stage=stage), StraightToGoal(), episodes=1, keep_failed=True)
+             for stage in ("away", "reach")]
+    saved = save(concatenate(parts), tmp_path / "demos.npz").read_bytes()
+    assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "warm_start.stage" in err and "(away, reach)" in err, err
+    assert (tmp_path / "demos.npz").read_bytes() == saved
 
 
 def test_validate_describes_the_mpc_warm_start_as_the_models_data(capsys, monkeypatch):
