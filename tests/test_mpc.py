@@ -117,6 +117,11 @@ AGENT = {
 }
 
 
+def write_task_with_away(folder) -> None:
+    """The test task with the `away` stage before reach (after `write`, which writes it without)."""
+    (folder / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [AWAY, *TASK["stages"]]}))
+
+
 def write(folder, total_steps: int, mpc: dict | None = None, **curriculum) -> object:
     (folder / "task.yaml").write_text(yaml.safe_dump(TASK))
     (folder / "agent.yaml").write_text(yaml.safe_dump({**AGENT, "mpc": {**AGENT["mpc"], **(mpc or {})}}))
@@ -172,7 +177,7 @@ def test_after_a_promotion_the_reward_learns_from_the_new_stage_alone(tmp_path):
     checkpoint without them loads with every row counted."""
     cur = write(tmp_path, total_steps=2800, promotion={"max_steps": 1200},
                 evaluation={"every_steps": 100_000, "episodes": 20, "split": "test"})
-    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [AWAY, *TASK["stages"]]}))
+    write_task_with_away(tmp_path)
     run = train(cur, run_dir=tmp_path / "run", progress=False)
     metrics = read_jsonl(run / "metrics.jsonl")
     assert metrics[-1]["stage"] == "reach"
@@ -353,7 +358,7 @@ def test_an_mpc_warm_start_over_phases_that_end_in_different_stages_must_name_on
     differ is refused before anything runs, naming the stages; naming one is accepted."""
     phases = [{"task": "task.yaml", "stages": ["away"]}, {"task": "task.yaml", "stages": ["reach"]}]
     cur = write(tmp_path, total_steps=800, phases=phases, warm_start={"generate_episodes": 2, "phase": "all"})
-    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [AWAY, *TASK["stages"]]}))
+    write_task_with_away(tmp_path)
     assert main(["train", str(cur), "--run-dir", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "warm_start.stage" in err and "(away, reach)" in err, err
@@ -366,7 +371,7 @@ def test_an_mpc_warm_start_from_a_demos_file_recorded_over_several_stages_is_ref
     """A demos file can hold several stages (recorded with `phase: all`), which `validate` cannot
     see: `train` refuses it in one line at `warm_start.stage`, naming them, and leaves the file be."""
     cur = write(tmp_path, total_steps=800, warm_start={"demos": "demos.npz"})
-    (tmp_path / "task.yaml").write_text(yaml.safe_dump({**TASK, "stages": [AWAY, *TASK["stages"]]}))
+    write_task_with_away(tmp_path)
     task = load_task(tmp_path / "task.yaml")
     parts = [record(TaskEnv(task, tmp_path / "task.yaml", stage=stage), StraightToGoal(), episodes=1, keep_failed=True)
              for stage in ("away", "reach")]
