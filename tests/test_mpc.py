@@ -452,41 +452,66 @@ def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resu
         assert len(row["missed_goals"]) == round(8 * (1 - row["success"])) and set(row["missed_goals"]) <= set(range(8))
 
 
+def demos_run(folder, task: str, stage: str, episodes: int, planned_steps: int) -> tuple[object, int]:
+    """A small MPC run warm-started from `episodes` scripted episodes of `stage`, then
+    `planned_steps` of its own: its final checkpoint and how many of its transitions the demos
+    hold (each episode's last observation starts no transition)."""
+    demos = generate(ROOT / task, stage=stage, episodes=episodes, seed=3)
+    save(demos, folder / "demos.npz")
+    agent = {**AGENT, "mpc": {**AGENT["mpc"], "hidden_sizes": [32, 32], "model_updates": 20}}
+    (folder / "agent.yaml").write_text(yaml.safe_dump(agent))
+    doc = {"name": f"{stage}-probe", "agent": "agent.yaml", "total_steps": demos.num_steps + planned_steps,
+           "phases": [{"task": str(ROOT / task), "stages": [stage]}], "warm_start": {"demos": "demos.npz"},
+           "evaluation": {"every_steps": 100_000, "episodes": 1, "split": "test"}, "checkpoint": {"every_steps": 100_000}}
+    (folder / "curriculum.yaml").write_text(yaml.safe_dump(doc))
+    run = train(folder / "curriculum.yaml", run_dir=folder / "run", progress=False)
+    return run / "final.pt", demos.num_steps - demos.num_episodes
+
+
+def probe_windows(tmp_path, monkeypatch, checkpoint, window: int) -> list[dict]:
+    """benchmarks/mpc_data_probe.py's rows for one checkpoint, read back from its results file."""
+    monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(checkpoint), "--window", str(window), "--out", "probe"])
+    mpc_data_probe.main()
+    (result,) = json.loads((tmp_path / "results/probe.json").read_text())["runs"].values()
+    return result["windows"]
+
+
 def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_buffer_oldest_first(tmp_path, monkeypatch):
     """benchmarks/mpc_data_probe.py on a real push run warm-started from Meta-World's scripted
     pushes: the demos (the buffer's first rows) move the puck toward the goal in most of the steps
-    that move it, the untrained planner's steps after them do not; a task without `goal - object`
-    features is a one-line error. A full buffer is read from the row its cursor overwrites next."""
+    that move it, with the hand at the puck, and never lift it; the untrained planner's steps
+    after them do neither; a task without `goal - object` features is a one-line error. A full
+    buffer is read from the row its cursor overwrites next."""
     ring = TransitionBuffer(capacity=3, obs_size=1, action_size=1)
     ring.add(*(np.arange(5.0)[:, None],) * 2, np.zeros(5), np.arange(5.0)[:, None], np.arange(5))
     assert ring.obs[ring.oldest_first(), 0].tolist() == [2.0, 3.0, 4.0]
     assert ring.stages[ring.oldest_first()].tolist() == [2, 3, 4]  # each row keeps its own stage
 
-    push = ROOT / "tasks/metaworld/push.yaml"
-    demos = generate(push, stage="push", episodes=2, seed=3)
-    save(demos, tmp_path / "demos.npz")
-    agent = {**AGENT, "mpc": {**AGENT["mpc"], "hidden_sizes": [32, 32], "model_updates": 20}}
-    (tmp_path / "agent.yaml").write_text(yaml.safe_dump(agent))
-    doc = {"name": "push-probe", "agent": "agent.yaml", "total_steps": demos.num_steps + 400,
-           "phases": [{"task": str(push), "stages": ["push"]}], "warm_start": {"demos": "demos.npz"},
-           "evaluation": {"every_steps": 100_000, "episodes": 1, "split": "test"}, "checkpoint": {"every_steps": 100_000}}
-    (tmp_path / "curriculum.yaml").write_text(yaml.safe_dump(doc))
-    run = train(tmp_path / "curriculum.yaml", run_dir=tmp_path / "run", progress=False)
-    transitions = demos.num_steps - demos.num_episodes
-    monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
-    monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(run / "final.pt"), "--window", str(transitions), "--out", "probe"])
-    mpc_data_probe.main()
-    (result,) = json.loads((tmp_path / "results/probe.json").read_text())["runs"].values()
-    expert, planned = result["windows"]
-    assert (expert["from"], expert["to"], planned["to"]) == (0, transitions, transitions + 400), result
+    (tmp_path / "push").mkdir()
+    checkpoint, transitions = demos_run(tmp_path / "push", "tasks/metaworld/push.yaml", "push", episodes=2, planned_steps=400)
+    expert, planned = probe_windows(tmp_path, monkeypatch, checkpoint, transitions)
+    assert (expert["from"], expert["to"], planned["to"]) == (0, transitions, transitions + 400), (expert, planned)
     assert expert["toward_goal"] >= 20 and expert["toward_goal"] >= 0.6 * expert["moved"], expert
-    assert planned["toward_goal"] <= 0.25 * expert["toward_goal"], result  # measured: 55 of 58 moves, then 0 of 1
+    assert planned["toward_goal"] <= 0.25 * expert["toward_goal"], planned  # measured: 55 of 58 moves, then 0 of 1
+    assert expert["at_object"] >= 0.5 * transitions and planned["at_object"] <= 0.25 * expert["at_object"], (expert, planned)  # 537 of 598, then 0
+    assert expert["rose"] <= 2, expert  # a pushed puck slides on the table
 
     point = write(tmp_path, total_steps=400)  # the point-mass task: no object, no `goal - object`
     train(point, run_dir=tmp_path / "point", progress=False)
     monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(tmp_path / "point/final.pt")])
     with pytest.raises(SystemExit, match="observation.relative_positions: true"):
         mpc_data_probe.main()
+
+
+def test_the_data_probe_counts_the_steps_a_scripted_pick_lifts_the_puck(tmp_path, monkeypatch):
+    """The probe's lift count on a real pick run warm-started from one scripted pick of
+    Meta-World's puck: the demo lifts it (measured: 11 steps of more than 5 mm), with the hand
+    at the puck in most of its steps; the untrained planner's 400 steps after it do not."""
+    checkpoint, transitions = demos_run(tmp_path, "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400)
+    expert, *planned = probe_windows(tmp_path, monkeypatch, checkpoint, transitions)
+    assert expert["rose"] >= 5 and expert["at_object"] >= 0.5 * transitions, expert
+    assert sum(row["rose"] for row in planned) <= 1, planned  # measured: 0
 
 
 def test_optimism_plans_toward_what_the_model_has_not_seen_and_pessimism_away_from_it(tmp_path):
