@@ -1,9 +1,9 @@
 """What an MPC run's own data holds: in each window of its transitions, how often the object moved,
 how often it moved toward the goal, how often the hand was at the object and how often the object
-rose (the first touch and the first lift a pick-place run needs before it can learn to carry). Why: on push the same config took off on one seed and not
-on another (benchmarks/RESULTS.md); a model can only learn to push toward the goal from steps that
-did, so counting them in each run's buffer says whether the runs differ in what they collected
-before they differ in success.
+rose. Why: on push the same config took off on one seed and not on another (benchmarks/RESULTS.md);
+a model can only learn to push toward the goal from steps that did, so counting them in each run's
+buffer says whether the runs differ in what they collected before they differ in success. The
+touch and lift counts say the same for pick-place, whose model must see a lift to plan one.
 
     python benchmarks/mpc_data_probe.py benchmarks/runs/model_based/mpc-push-large-seed0/final.pt
                                         benchmarks/runs/model_based/mpc-push-large-seed1/checkpoint.pt
@@ -36,7 +36,8 @@ from taskforge.run import load_run  # noqa: E402
 
 def relative_positions(checkpoint: Path) -> tuple[np.ndarray, np.ndarray, int]:
     """`object - tool, goal - object` before and after every transition of the run's buffer,
-    oldest first, and the run's step. A one-line error (SystemExit) where the run cannot tell the object's motion."""
+    oldest first, and the run's step. A one-line error (SystemExit) where the run cannot tell the
+    object's motion."""
     run = load_run(checkpoint)
     if not isinstance(run.agent, MPCAgent):
         sys.exit(f"error: {checkpoint}: not an algo: mpc run (only its buffer holds the data it collected)")
