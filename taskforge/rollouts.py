@@ -52,7 +52,8 @@ def _rate(successes: np.ndarray) -> dict:
 class StageResult:
     """Outcomes of `trials` trials of `trial_episodes` episodes: arrays `[trial, episode]`, in the
     order the trials ended, with each trial's goal index and reset seed (`goals`, `seeds`; empty
-    where a caller built the result without them)."""
+    where a caller built the result without them) and where its goal and object stood at its
+    first reset (`starts`: `goal_pos`, `object_pos`, those of them the backend has)."""
 
     task: str
     stage: str
@@ -63,6 +64,7 @@ class StageResult:
     lengths: list[list[int]] = field(default_factory=list)
     goals: list[int] = field(default_factory=list)
     seeds: list[int] = field(default_factory=list)
+    starts: list[dict[str, list[float]]] = field(default_factory=list)
 
     @property
     def trials(self) -> int:
@@ -114,18 +116,20 @@ class StageResult:
         return row
 
     def _by_goal(self) -> dict:
-        """`missed_goals` and every trial's goal, reset seed and episode outcomes (`per_trial`, by
-        seed).
+        """`missed_goals` and every trial's goal, reset seed, start positions and episode outcomes
+        (`per_trial`, by seed).
 
         Why: a success rate says how often, not where. Whether two agents (a planner and the
         prior it starts from, say) fail on the same goals, or whether misses share a place on the
         table, can only be read from the goals themselves; with the seed, any one trial can be
-        replayed (`taskforge eval --seed`, trial n resets with seed + n)."""
-        trials = sorted(zip(self.seeds, self.goals, self.successes, self.returns, self.lengths))
+        replayed (`taskforge eval --seed`, trial n resets with seed + n). The positions say where
+        without a second simulator: whether the misses of a pick-place run are the high goals, say."""
+        starts = self.starts or [{}] * self.trials
+        trials = sorted(zip(self.seeds, self.goals, starts, self.successes, self.returns, self.lengths), key=lambda t: t[0])
         return {
             "missed_goals": self.missed_goals,
-            "per_trial": [{"seed": seed, "goal": goal, "successes": successes, "returns": returns, "lengths": lengths}
-                          for seed, goal, successes, returns, lengths in trials],
+            "per_trial": [{"seed": seed, "goal": goal, **start, "successes": successes, "returns": returns, "lengths": lengths}
+                          for seed, goal, start, successes, returns, lengths in trials],
         }
 
 
@@ -240,12 +244,16 @@ def _trials(
     active = [True] * len(envs)
     obs = np.zeros((len(envs), envs[0].observation_space.shape[0]), dtype=np.float32)
     starts = np.ones(len(envs), dtype=bool)
+    positions: list[dict[str, list[float]]] = [{}] * len(envs)  # where the goal and object of each env's trial began
 
     def start(i: int) -> None:
         n = playing[i] = queue.pop(0)
         options = {"stage": stage, "task": sub_task, "goal_index": n % num_goals}
         obs[i], _ = envs[i].reset(seed=seed + n, options=options)
         starts[i] = True  # a fresh recurrent state for every trial
+        features = envs[i].unwrapped.features()
+        positions[i] = {name: np.asarray(features[name], dtype=float).round(4).tolist()
+                        for name in ("goal_pos", "object_pos") if name in features}
 
     for i in range(len(envs)):
         start(i)
@@ -265,6 +273,7 @@ def _trials(
                 result.lengths.append(info["trial_lengths"].tolist())
                 result.goals.append(playing[i] % num_goals)
                 result.seeds.append(seed + playing[i])
+                result.starts.append(positions[i])
                 if queue:
                     start(i)
                 else:

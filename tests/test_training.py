@@ -21,7 +21,7 @@ from gymnasium.spaces import Box
 
 from taskforge.agents import PPOAgent
 from taskforge.cli import main
-from taskforge.envs import load_task
+from taskforge.envs import TaskEnv, load_task
 from taskforge.evaluation.report import format_table
 from taskforge.rollouts import evaluate, evaluate_rows
 from taskforge.run import load_checkpoint, read_jsonl, save_checkpoint
@@ -458,6 +458,19 @@ def test_evaluating_sub_tasks_in_turn_on_shared_envs_matches_each_alone():
     assert [r.task for r in rows] == ["reach-v3", "window-open-v3"]
     assert rows[1].returns == alone.returns and rows[1].lengths == alone.lengths
     assert rows[0].returns != rows[1].returns
+
+    # each trial records where its goal and object began: those of a fresh env reset as the trial was
+    env = TaskEnv(task, mt10, stage="solve", split="test")
+    try:
+        for row in rows:
+            trials = row.as_dict()["per_trial"]
+            for t in trials:
+                env.reset(seed=t["seed"], options={"stage": "solve", "task": row.task, "goal_index": t["goal"]})
+                for name in ("goal_pos", "object_pos"):
+                    assert t[name] == pytest.approx(env.features()[name], abs=1e-4)
+            assert len({tuple(t["goal_pos"]) for t in trials}) == 3  # three goals, three places
+    finally:
+        env.close()
 
 
 def test_an_evaluation_records_each_trials_goal_and_seed_with_its_own_outcome(tmp_path, capsys):
