@@ -53,7 +53,7 @@ class StageResult:
     """Outcomes of `trials` trials of `trial_episodes` episodes: arrays `[trial, episode]`, in the
     order the trials ended, with each trial's goal index and reset seed (`goals`, `seeds`; empty
     where a caller built the result without them) and where its goal and object stood at its
-    first reset (`starts`: `goal_pos`, `object_pos`, those of them the backend has)."""
+    first reset (`start_positions`: `goal_pos`, `object_pos`, those of them the backend has)."""
 
     task: str
     stage: str
@@ -64,7 +64,7 @@ class StageResult:
     lengths: list[list[int]] = field(default_factory=list)
     goals: list[int] = field(default_factory=list)
     seeds: list[int] = field(default_factory=list)
-    starts: list[dict[str, list[float]]] = field(default_factory=list)
+    start_positions: list[dict[str, list[float]]] = field(default_factory=list)
 
     @property
     def trials(self) -> int:
@@ -124,8 +124,8 @@ class StageResult:
         table, can only be read from the goals themselves; with the seed, any one trial can be
         replayed (`taskforge eval --seed`, trial n resets with seed + n). The positions say where
         without a second simulator: whether the misses of a pick-place run are the high goals, say."""
-        starts = self.starts or [{}] * self.trials
-        trials = sorted(zip(self.seeds, self.goals, starts, self.successes, self.returns, self.lengths), key=lambda t: t[0])
+        positions = self.start_positions or [{}] * self.trials
+        trials = sorted(zip(self.seeds, self.goals, positions, self.successes, self.returns, self.lengths), key=lambda t: t[0])
         return {
             "missed_goals": self.missed_goals,
             "per_trial": [{"seed": seed, "goal": goal, **start, "successes": successes, "returns": returns, "lengths": lengths}
@@ -273,7 +273,7 @@ def _trials(
                 result.lengths.append(info["trial_lengths"].tolist())
                 result.goals.append(playing[i] % num_goals)
                 result.seeds.append(seed + playing[i])
-                result.starts.append(positions[i])
+                result.start_positions.append(positions[i])
                 if queue:
                     start(i)
                 else:

@@ -447,7 +447,8 @@ def test_asymmetric_critic_without_privileged_features_is_a_clear_error(tmp_path
 def test_evaluating_sub_tasks_in_turn_on_shared_envs_matches_each_alone():
     """An MT10 evaluation plays each sub-task on one set of envs (fresh ones per sub-task built
     400 Meta-World envs per evaluation): a row must not depend on the rows played before it
-    on those envs, and each row must play its own sub-task."""
+    on those envs, and each row must play its own sub-task, recording where each trial's goal
+    and object began."""
     mt10 = TASKS / "metaworld/mt10.yaml"
     spec = agent_spec(policy={"hidden_sizes": [32, 32]}, ppo=SMALL_PPO, runtime={"vector": "sync", "update_threads": 1})
     agent = PPOAgent(spec, Box(-np.inf, np.inf, (39 + 10,), np.float32), Box(-1.0, 1.0, (4,), np.float32), seed=0)
