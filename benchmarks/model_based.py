@@ -15,6 +15,8 @@ Variants (benchmarks/configs/, one file each) and the goals of issue 23:
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py); `mpc-pick-place-native` the same in TD-MPC2's
   setting: Meta-World's own reward, no randomisation (configs/pick_place_native.yaml);
+  `mpc-pick-place-native-beta` that with the model fitted by β-NLL (agents/mpc_beta.yaml: under
+  PETS's plain likelihood the native run's model never learnt the puck's motion);
 - `mpc-pick-place-demos`: the same with 50 scripted episodes seeding the model, 100k; >= 0.95
   within 100k (PPO with demos: benchmarks/warm_start.py); `mpc-pick-place-demos-prior` the same
   with a policy cloned from the demos proposing plans (agents/mpc_demos.yaml).
@@ -72,6 +74,7 @@ VARIANTS: dict[str, Variant] = {
     "ppo-push": Variant("push", "push", 200_000, None),
     "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-native": Variant("pick-place", "place", 1_000_000, 0.80),
+    "mpc-pick-place-native-beta": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-demos": Variant("pick-place", "place", 100_000, 0.95),
     "mpc-pick-place-demos-prior": Variant("pick-place", "place", 100_000, 0.95),
 }

@@ -1,24 +1,28 @@
 """Is an MPC run's planner or its model what limits it? Two checks of one finished `algo: mpc` run:
 
-1. The model: its one-step error on the object's motion, on the run's own buffer (its local
-   `checkpoint.pt`), binned by how far the object really moved, next to predicting no motion.
-   A model that has not learnt contact is no better than "no motion" where the object moved.
+1. The model: its one-step error on the object's motion (and the hand's, `--hand`), on the
+   run's own buffer (its local `checkpoint.pt`), binned by how far the object really moved, next
+   to predicting no motion. A model that has not learnt contact is no better than "no motion"
+   where the object moved.
 2. The fit (`--refit UPDATES`): is it the data or the fit? Fresh models of the run's size fitted
    offline on 90 % of that buffer for UPDATES Adam steps, once with uniform batches (as the agent
    draws them) and once with `--oversample` of each batch drawn from transitions where the object
    moved >= `--moved-mm` (default 5: Meta-World push's observation noise, std 1 mm per number,
    alone makes a still puck "move" 2-3 mm between two observations), scored per bin on the other 10 % next to the run's own model; `--hidden` sizes
-   the refits' layers (is it the model's capacity?).
+   the refits' layers (is it the model's capacity?), and `--nll-beta B ...` adds a uniform refit
+   fitted by β-NLL for each B (is it the loss? agents/dynamics.py).
 3. The planner: held-out success of the final model with the planner it trained with, and with
-   a bigger one (200 candidates x 4 rounds x 15 steps, 20 elites: ~10x agents/mpc.yaml's search)
-   on the same goals and seeds (`--trials 0` skips it); with `--refit`, also of each refitted
+   a bigger one (200 candidates x 4 rounds x 15 steps, 20 elites: ~10x agents/mpc.yaml's search;
+   `--no-bigger` skips it) on the same goals and seeds (`--trials 0` skips it all); with `--refit`, also of each refitted
    model with the run's own planner (and its terminal value, if it has one): does a model that
    predicts contact better make the planner push?
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
+                                   [--nll-beta 0.5] [--no-bigger] [--out NAME]
 
-`--object`: where the object's position sits in the observation (Meta-World: 4:7).
+`--object`, `--hand`: where the object's and the hand's positions sit in the observation
+(Meta-World: 4:7, 0:3).
 """
 
 from __future__ import annotations
@@ -47,9 +51,12 @@ def moved_mm(agent, obj: slice) -> torch.Tensor:
     return (agent.buffer.next_obs[:n, obj] - agent.buffer.obs[:n, obj]).norm(dim=1) * 1000
 
 
-def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch.Tensor, sample: int = 5000) -> list[dict]:
+def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch.Tensor, sample: int = 5000,
+                         hand: slice | None = None) -> list[dict]:
     """Per bin of true object motion (mm), among the buffer's transitions `rows`: how many, the
-    `model`'s mean error and the error of predicting no motion, on up to `sample` of the bin."""
+    `model`'s mean error and the error of predicting no motion, on up to `sample` of the bin; with
+    `hand`, the same two for the hand's position (a model that has not learnt the hand's own
+    motion cannot plan where to take it)."""
     buffer, moved, members = agent.buffer, moved_mm(agent, obj), model.members
     result = []
     for lo, hi in BINS_MM:
@@ -58,17 +65,25 @@ def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch
         with torch.no_grad():
             predicted, _ = model.mean_prediction(buffer.obs[pick][None].expand(members, -1, -1), buffer.actions[pick][None].expand(members, -1, -1))
         error = (predicted.mean(0)[:, obj] - buffer.next_obs[pick, obj]).norm(dim=1) * 1000
-        result.append({"moved_mm": [lo, hi], "transitions": len(idx), "model_error_mm": error.mean().item() if len(pick) else None,
-                       "no_motion_error_mm": moved[pick].mean().item() if len(pick) else None})
+        row = {"moved_mm": [lo, hi], "transitions": len(idx), "model_error_mm": error.mean().item() if len(pick) else None,
+               "no_motion_error_mm": moved[pick].mean().item() if len(pick) else None}
+        if hand is not None:
+            hand_moved = (buffer.next_obs[pick, hand] - buffer.obs[pick, hand]).norm(dim=1) * 1000
+            hand_error = (predicted.mean(0)[:, hand] - buffer.next_obs[pick, hand]).norm(dim=1) * 1000
+            row |= {"hand_error_mm": hand_error.mean().item() if len(pick) else None,
+                    "hand_no_motion_error_mm": hand_moved.mean().item() if len(pick) else None}
+        result.append(row)
     return result
 
 
 def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversample: float, seed: int,
-          hidden: list[int] | None = None, threshold_mm: float = 5.0) -> DynamicsEnsemble:
+          hidden: list[int] | None = None, threshold_mm: float = 5.0, nll_beta: float | None = None) -> DynamicsEnsemble:
     """A fresh model of the agent's size (or of `hidden` layers), fitted as `MPCAgent._fit` fits (standardised on the
     data, Adam, bootstrap batches per member) on the buffer rows `train` for `updates` steps;
-    `oversample` of each batch drawn from the rows where the object moved >= `threshold_mm`."""
-    spec, generator = agent.mpc.model_copy(update={"hidden_sizes": hidden or agent.mpc.hidden_sizes}), torch.Generator().manual_seed(seed)
+    `oversample` of each batch drawn from the rows where the object moved >= `threshold_mm`;
+    by β-NLL with `nll_beta` (default: the run's own loss)."""
+    change = {"hidden_sizes": hidden or agent.mpc.hidden_sizes} | ({} if nll_beta is None else {"nll_beta": nll_beta})
+    spec, generator = agent.mpc.model_copy(update=change), torch.Generator().manual_seed(seed)
     inputs, targets = agent.buffer.inputs_and_targets()
     model = DynamicsEnsemble(agent.buffer.obs.shape[1], agent.buffer.actions.shape[1], spec, generator)
     optimizer = torch.optim.Adam(model.parameters(), lr=spec.learning_rate, weight_decay=spec.weight_decay)
@@ -83,8 +98,9 @@ def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversam
 
 
 def motion_table(rows: list[dict]) -> None:
-    print_table(["object moved (mm)", "transitions", "model error (mm)", "'no motion' error (mm)"],
-                [[f"{r['moved_mm'][0]}-{r['moved_mm'][1]}", r["transitions"], r["model_error_mm"], r["no_motion_error_mm"]] for r in rows])
+    print_table(["object moved (mm)", "transitions", "model error (mm)", "'no motion' error (mm)", "hand: model error", "hand: 'no motion'"],
+                [[f"{r['moved_mm'][0]}-{r['moved_mm'][1]}", r["transitions"], r["model_error_mm"], r["no_motion_error_mm"],
+                  r.get("hand_error_mm"), r.get("hand_no_motion_error_mm")] for r in rows])
 
 
 def main() -> None:
@@ -92,17 +108,21 @@ def main() -> None:
     parser.add_argument("run", type=Path)
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--object", default="4:7", help="the object's position in the observation, start:stop")
+    parser.add_argument("--hand", default="0:3", help="the hand's position in the observation, start:stop")
     parser.add_argument("--refit", type=int, default=0, help="Adam steps of the offline refits (0: skip them)")
     parser.add_argument("--oversample", type=float, default=0.5, help="share of each refit batch from transitions that moved the object (0: the uniform refit only)")
     parser.add_argument("--moved-mm", type=float, default=5.0, help="what counts as the object moving, for --oversample")
     parser.add_argument("--hidden", type=int, nargs="+", help="the refits' hidden layer sizes (default: the run's)")
+    parser.add_argument("--nll-beta", type=float, nargs="+", default=[], help="also a uniform refit fitted by beta-NLL with each beta")
+    parser.add_argument("--bigger", action=argparse.BooleanOptionalAction, default=True, help="also plan with a ~10x bigger search")
+    parser.add_argument("--out", help="the result's name under benchmarks/results/ (default: mpc_probe_<run>[_<hidden>])")
     args = parser.parse_args()
     run = load_run(args.run)
     agent = run.agent
-    obj = slice(*(int(x) for x in args.object.split(":")))
+    obj, hand = (slice(*(int(x) for x in s.split(":"))) for s in (args.object, args.hand))
     agent.load_state_dict(load_checkpoint(args.run / "checkpoint.pt")["agent"])  # the buffer: the final policy file has none
     everything = torch.arange(agent.buffer.size)
-    motion = object_motion_errors(agent, agent.model, obj, everything)
+    motion = object_motion_errors(agent, agent.model, obj, everything, hand=hand)
     motion_table(motion)
     payload: dict = {"run": str(args.run), "step": agent.global_step, "object_motion": motion}
     refits: dict[str, DynamicsEnsemble] = {}
@@ -110,30 +130,32 @@ def main() -> None:
         split = torch.randperm(agent.buffer.size, generator=torch.Generator().manual_seed(0))
         held_out, train = split[: len(split) // 10], split[len(split) // 10 :]
         moved = moved_mm(agent, obj)
-        shares = [("refit, uniform", 0.0)] + ([(f"refit, {args.oversample:.0%} moves >= {args.moved_mm:g} mm", args.oversample)] if args.oversample else [])
-        for label, share in shares:
+        fits = [("refit, uniform", 0.0, None)]
+        fits += [(f"refit, {args.oversample:.0%} moves >= {args.moved_mm:g} mm", args.oversample, None)] if args.oversample else []
+        fits += [(f"refit, uniform, beta-NLL {beta:g}", 0.0, beta) for beta in args.nll_beta]
+        for label, share, beta in fits:
             start = time.perf_counter()
-            refits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm)
+            refits[label] = refit(agent, train, moved, args.refit, share, seed=0, hidden=args.hidden, threshold_mm=args.moved_mm, nll_beta=beta)
             print(f"{label}: {args.refit} steps in {time.perf_counter() - start:.0f} s")
-        fits = {"run's model": agent.model} | refits
+        models = {"run's model": agent.model} | refits
         payload["refit"] = {"updates": args.refit, "oversample": args.oversample, "moved_mm": args.moved_mm, "hidden": args.hidden or agent.mpc.hidden_sizes,
-                            "held_out": len(held_out),
-                            "errors": {label: object_motion_errors(agent, model, obj, held_out) for label, model in fits.items()}}
+                            "nll_beta": args.nll_beta, "run_nll_beta": agent.mpc.nll_beta, "held_out": len(held_out),
+                            "errors": {label: object_motion_errors(agent, model, obj, held_out, hand=hand) for label, model in models.items()}}
         for label, rows in payload["refit"]["errors"].items():
             print(f"\n{label}, held-out 10 %:")
             motion_table(rows)
     if args.trials:
-        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits)}
-    name = f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")
+        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits, args.bigger)}
+    name = args.out or f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")
     print(f"wrote {write_result(name, payload)}")
 
 
-def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble]) -> list[dict]:
-    """Held-out success of the final model with its own planner and with `BIGGER`, and of each
+def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble], bigger: bool = True) -> list[dict]:
+    """Held-out success of the final model with its own planner (and with `BIGGER`), and of each
     of `refits` with the run's own planner."""
     task, task_file, stages = run.phases[-1]
     own_model, own_planner = agent.model, agent.spec.planning
-    plans = [("run's model", own_model, "as trained", {}), ("run's model", own_model, "bigger search", BIGGER)]
+    plans = [("run's model", own_model, "as trained", {})] + ([("run's model", own_model, "bigger search", BIGGER)] if bigger else [])
     plans += [(label, model, "as trained", {}) for label, model in refits.items()]
     rows = []
     for model_label, model, planner, change in plans:

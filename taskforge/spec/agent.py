@@ -115,6 +115,11 @@ class MPCSpec(StrictModel):
     learning_rate: float = Field(default=1e-3, gt=0.0)
     weight_decay: float = Field(default=5e-5, ge=0.0)
     """L2 on the model's weights (PETS used 2.5e-5 to 1e-4 by layer)."""
+    nll_beta: float = Field(default=0.0, ge=0.0, le=1.0)
+    """β-NLL (Seitzer et al. 2022): each observation dimension's negative log-likelihood
+    weighted by its predicted variance to the power β. 0: PETS's plain likelihood, under which
+    the hand and puck of Meta-World went unlearnt (agents/dynamics.py); 0.5: the paper's advice
+    and agents/mpc_beta.yaml's; 1: the mean learns as by squared error."""
     batch_size: int = Field(default=256, ge=1)
     model_updates: int = Field(default=200, ge=1)
     """Gradient steps on the model after each collection of `steps_per_update` env steps."""
