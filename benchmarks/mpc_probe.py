@@ -1,4 +1,4 @@
-"""Is an MPC run's planner or its model what limits it? Two checks of one finished `algo: mpc` run:
+"""Is an MPC run's planner or its model what limits it? Three checks of one finished `algo: mpc` run:
 
 1. The model: its one-step error on the object's motion (and the hand's, `--hand`), on the
    run's own buffer (its local `checkpoint.pt`), binned by how far the object really moved, next

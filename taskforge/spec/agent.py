@@ -118,7 +118,7 @@ class MPCSpec(StrictModel):
     nll_beta: float = Field(default=0.0, ge=0.0, le=1.0)
     """β-NLL (Seitzer et al. 2022): each observation dimension's negative log-likelihood
     weighted by its predicted variance to the power β. 0: PETS's plain likelihood, under which
-    the hand and puck of Meta-World went unlearnt (agents/dynamics.py); 0.5: the paper's advice
+    the hand and puck of Meta-World went unlearnt (taskforge/agents/dynamics.py); 0.5: the paper's advice
     and agents/mpc_beta.yaml's; 1: the mean learns as by squared error."""
     batch_size: int = Field(default=256, ge=1)
     model_updates: int = Field(default=200, ge=1)
