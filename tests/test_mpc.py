@@ -12,7 +12,7 @@ import yaml
 from gymnasium.spaces import Box
 
 import benchmarks.common
-from benchmarks import model_based, mpc_data_probe, mpc_prior_probe
+from benchmarks import model_based, mpc_data_probe, mpc_prior_probe, mpc_probe
 from taskforge.agents import MPCAgent, make_vector_env
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.mpc import TransitionBuffer
@@ -565,6 +565,31 @@ def test_the_data_probe_counts_the_steps_a_scripted_pick_lifts_the_puck(tmp_path
     expert, *planned = probe_windows(tmp_path, monkeypatch, checkpoint, transitions)
     assert expert["rose"] >= 5 and expert["at_object"] >= 0.5 * transitions, expert
     assert sum(row["rose"] for row in planned) <= 1, planned  # measured: 0
+
+
+def test_the_model_probe_bins_the_whole_buffer_refits_it_and_plans_with_each_model(tmp_path, monkeypatch):
+    """benchmarks/mpc_probe.py on a real pick run warm-started from one scripted pick: its motion
+    table covers every transition of the buffer once; each refit (uniform, oversampled, β-NLL)
+    learns the hand's motion, below predicting none, on the 10 % held out from it; each
+    model then plans the held-out goal with the run's own search, in the order asked."""
+    checkpoint, transitions = demos_run(tmp_path, "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400)
+    monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "1", "--refit", "1500",
+                                     "--nll-beta", "0.5", "--no-bigger", "--out", "probe"])
+    mpc_probe.main()
+    result = json.loads((tmp_path / "results/probe.json").read_text())
+    assert sum(row["transitions"] for row in result["object_motion"]) == transitions + 400, result["object_motion"]
+    refits = ["refit, uniform", "refit, 50% moves >= 5 mm", "refit, uniform, beta-NLL 0.5"]
+    errors = result["refit"]["errors"]
+    assert list(errors) == ["run's model", *refits] and result["refit"]["run_nll_beta"] == 0.0, list(errors)
+    for label in refits:
+        rows = [row for row in errors[label] if row["transitions"]]
+        assert sum(row["transitions"] for row in errors[label]) == result["refit"]["held_out"]
+        learnt = sum(row["hand_error_mm"] * row["transitions"] for row in rows)
+        still = sum(row["hand_no_motion_error_mm"] * row["transitions"] for row in rows)
+        assert learnt < 0.85 * still, (label, rows)  # measured 0.56, 0.80, 0.56 of "no motion"
+    assert [(row["model"], row["planner"]) for row in result["planners"]] == [("run's model", "as trained")] + [(label, "as trained") for label in refits]
+    assert all(row["success_rate"] in (0.0, 1.0) for row in result["planners"]), result["planners"]
 
 
 def test_optimism_plans_toward_what_the_model_has_not_seen_and_pessimism_away_from_it(tmp_path):
