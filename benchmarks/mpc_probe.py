@@ -45,10 +45,20 @@ BIGGER = {"population": 200, "iterations": 4, "horizon": 15, "elites": 20}
 BINS_MM = ((0, 2), (2, 5), (5, 10), (10, 1000))
 
 
+def distance_mm(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Row by row, the distance (mm) between two blocks of positions in metres."""
+    return (a - b).norm(dim=1) * 1000
+
+
+def mean_mm(mm: torch.Tensor) -> float | None:
+    """The mean of a bin's distances; an empty bin has none."""
+    return mm.mean().item() if len(mm) else None
+
+
 def moved_mm(agent, obj: slice) -> torch.Tensor:
     """How far the object truly moved (mm) in each transition of the agent's buffer."""
     n = agent.buffer.size
-    return (agent.buffer.next_obs[:n, obj] - agent.buffer.obs[:n, obj]).norm(dim=1) * 1000
+    return distance_mm(agent.buffer.next_obs[:n, obj], agent.buffer.obs[:n, obj])
 
 
 def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch.Tensor, sample: int = 5000,
@@ -64,14 +74,12 @@ def object_motion_errors(agent, model: DynamicsEnsemble, obj: slice, rows: torch
         pick = idx[:sample]
         with torch.no_grad():
             predicted, _ = model.mean_prediction(buffer.obs[pick][None].expand(members, -1, -1), buffer.actions[pick][None].expand(members, -1, -1))
-        error = (predicted.mean(0)[:, obj] - buffer.next_obs[pick, obj]).norm(dim=1) * 1000
-        row = {"moved_mm": [lo, hi], "transitions": len(idx), "model_error_mm": error.mean().item() if len(pick) else None,
-               "no_motion_error_mm": moved[pick].mean().item() if len(pick) else None}
+        predicted = predicted.mean(0)
+        row = {"moved_mm": [lo, hi], "transitions": len(idx), "model_error_mm": mean_mm(distance_mm(predicted[:, obj], buffer.next_obs[pick, obj])),
+               "no_motion_error_mm": mean_mm(moved[pick])}
         if hand is not None:
-            hand_moved = (buffer.next_obs[pick, hand] - buffer.obs[pick, hand]).norm(dim=1) * 1000
-            hand_error = (predicted.mean(0)[:, hand] - buffer.next_obs[pick, hand]).norm(dim=1) * 1000
-            row |= {"hand_error_mm": hand_error.mean().item() if len(pick) else None,
-                    "hand_no_motion_error_mm": hand_moved.mean().item() if len(pick) else None}
+            row |= {"hand_error_mm": mean_mm(distance_mm(predicted[:, hand], buffer.next_obs[pick, hand])),
+                    "hand_no_motion_error_mm": mean_mm(distance_mm(buffer.next_obs[pick, hand], buffer.obs[pick, hand]))}
         result.append(row)
     return result
 
