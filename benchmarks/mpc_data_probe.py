@@ -5,10 +5,17 @@ a model can only learn to push toward the goal from steps that did, so counting 
 buffer says whether the runs differ in what they collected before they differ in success. The
 touch and lift counts say the same for pick-place, whose model must see a lift to plan one.
 
+A second table follows the run's own episodes through the task, by the window each began in: how
+many the hand reached the object in, lifted it in, brought it within the success distance of the
+goal in, and ended there. Why: a run whose success stalls stalls at one of these steps (the hand
+never gets there, the grasp slips, the carry misses, the puck is dropped after arriving), and each
+asks for a different fix.
+
     python benchmarks/mpc_data_probe.py benchmarks/runs/model_based/mpc-push-large-seed0/final.pt
                                         benchmarks/runs/model_based/mpc-push-large-seed1/checkpoint.pt
                                         [--window 20000] [--moved 0.005] [--closer 0.003] [--near 0.02]
-                                        [--rose 0.005] [--out mpc_data_probe]
+                                        [--rose 0.005] [--lifted 0.02] [--success 0.07]
+                                        [--out mpc_data_probe]
 
 Each checkpoint's buffer (`algo: mpc`) is read oldest first; a row is one env step of one env
 (a warm start's demos come first). The object's motion is read off the `goal - object` features
@@ -71,6 +78,48 @@ def count_contacts(before: np.ndarray, after: np.ndarray, window: int, moved: fl
     return rows
 
 
+def episodes(before: np.ndarray, after: np.ndarray, lookahead: int = 64) -> list[np.ndarray]:
+    """The buffer's rows grouped into episodes, each oldest first. Why this way: the buffer keeps
+    no episode ends and interleaves its envs, but a step's next observation is, bit for bit, the
+    observation the same env's next step began from, a few rows on (as many as there are envs;
+    demos run one env); a row no later row continues (within `lookahead`) ended its episode
+    (an autoreset begins the next one elsewhere). A run resumed in chunks resets its envs at each
+    resume, so the episodes then under way end there, short: they count as episodes too."""
+    successor = np.full(len(before), -1)
+    for k in range(lookahead, 0, -1):  # the nearest match wins: written last
+        match = np.flatnonzero((after[:-k] == before[k:]).all(axis=1))
+        successor[match] = match + k
+    continued = np.zeros(len(before), dtype=bool)
+    continued[successor[successor >= 0]] = True
+    chains = []
+    for start in np.flatnonzero(~continued):
+        rows = [start]
+        while successor[rows[-1]] >= 0:
+            rows.append(successor[rows[-1]])
+        chains.append(np.asarray(rows))
+    return chains
+
+
+def episode_funnel(before: np.ndarray, after: np.ndarray, window: int, near: float, lifted: float,
+                   success: float) -> list[dict]:
+    """Per window of `window` transitions, the episodes that began in it and, of them, those in
+    which the hand came within `near` metres of the object, the object rose `lifted` metres above
+    where it began, came within `success` metres of the goal, and was within it at the
+    episode's last step (Meta-World's success is the first of these two, at any step)."""
+    rows = [{"from": start, "to": min(start + window, len(before)), "episodes": 0, "reached": 0, "lifted": 0,
+             "at_goal": 0, "ended_at_goal": 0} for start in range(0, len(before), window)]
+    for chain in episodes(before, after):
+        states = np.concatenate([before[chain[:1]], after[chain]])  # object - tool, goal - object
+        to_goal = np.linalg.norm(states[:, 3:], axis=1)
+        row = rows[chain[0] // window]
+        row["episodes"] += 1
+        row["reached"] += int(np.linalg.norm(states[:, :3], axis=1).min() < near)
+        row["lifted"] += int((states[0, 5] - states[:, 5]).max() > lifted)  # the goal's height is fixed
+        row["at_goal"] += int(to_goal.min() < success)
+        row["ended_at_goal"] += int(to_goal[-1] < success)
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("checkpoints", type=Path, nargs="+")
@@ -83,18 +132,27 @@ def main() -> None:
     # the tasks' 1 mm of per-step sensor noise moves `goal - object`'s height by 1.4 mm (std) from
     # one step to the next: 5 mm is 3.5 std, by chance in ~0.02 % of the steps
     parser.add_argument("--rose", type=float, default=0.005, help="metres the object rises in one step to count")
+    parser.add_argument("--lifted", type=float, default=0.02, help="metres above its start for an episode to count as a lift")
+    parser.add_argument("--success", type=float, default=0.07, help="metres from the goal that count as there (Meta-World pick-place: 0.07)")
     parser.add_argument("--out", default="mpc_data_probe", help="results file name, without .json")
     args = parser.parse_args()
-    runs, table = {}, []
+    runs, table, funnel = {}, [], []
     for checkpoint in args.checkpoints:
         before, after, step = relative_positions(checkpoint)
         rows = count_contacts(before, after, args.window, args.moved, args.closer, args.near, args.rose)
-        runs[str(checkpoint)] = {"step": step, "transitions": len(before), "windows": rows}
+        ends = episode_funnel(before, after, args.window, args.near, args.lifted, args.success)
+        runs[str(checkpoint)] = {"step": step, "transitions": len(before), "windows": rows, "episodes": ends}
+        funnel += [[checkpoint.parent.name, f"{r['from']:,}-{r['to']:,}", r["episodes"], r["reached"], r["lifted"],
+                    r["at_goal"], r["ended_at_goal"]] for r in ends]
         table += [[checkpoint.parent.name, f"{r['from']:,}-{r['to']:,}", r["moved"], r["toward_goal"],
                    f"{r['toward_goal'] / max(r['moved'], 1):.2f}", r["at_object"], r["rose"]] for r in rows]
     print_table(["run", "transitions", f"object moved > {args.moved * 1000:g} mm", f"of them > {args.closer * 1000:g} mm nearer the goal",
                  "share toward the goal", f"hand < {args.near * 100:g} cm from it", f"object rose > {args.rose * 1000:g} mm"], table)
-    payload = {"window": args.window, "moved": args.moved, "closer": args.closer, "near": args.near, "rose": args.rose, "runs": runs}
+    print_table(["run", "episodes begun in", "episodes", f"hand < {args.near * 100:g} cm from the object",
+                 f"object lifted > {args.lifted * 100:g} cm", f"object < {args.success * 100:g} cm from the goal",
+                 "and there at the end"], funnel)
+    payload = {"window": args.window, "moved": args.moved, "closer": args.closer, "near": args.near, "rose": args.rose,
+               "lifted": args.lifted, "success": args.success, "runs": runs}
     print(f"wrote {write_result(args.out, payload)}")
 
 

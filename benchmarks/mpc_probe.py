@@ -13,13 +13,21 @@
    fitted by β-NLL for each B (is it the loss? agents/dynamics.py).
 3. The planner: held-out success of the final model with the planner it trained with, and with
    a bigger one (200 candidates x 4 rounds x 15 steps, 20 elites: ~10x agents/mpc.yaml's search;
-   `--no-bigger` skips it) on the same goals and seeds (`--trials 0` skips it all); with `--refit`, also of each refitted
+   `--no-bigger` skips it) and, where the run plans with a terminal value, without it (the
+   predicted rewards alone: does the value steer the plans?) on the same goals and seeds (`--trials 0` skips it all); with `--refit`, also of each refitted
    model with the run's own planner (and its terminal value, if it has one): does a model that
    predicts contact better make the planner push?
+4. The value (`--value-refit UPDATES`, a run with `terminal_value`): is it the value the run
+   learnt online that steers its plans away? A fresh V fitted offline by TD(0) on the whole
+   final buffer (as `TerminalValue.fit` fits it, UPDATES steps), and one that reads only the
+   observation's entries `--value-inputs` (default: Meta-World's hand and object heights, the
+   gripper and `object - tool, goal - object`: where the hand is relative to the puck and the
+   puck to the goal, not where on the table), each planning with the run's model and search.
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
-                                   [--nll-beta 0.5] [--no-bigger] [--out NAME]
+                                   [--nll-beta 0.5] [--no-bigger] [--value-refit 40000]
+                                   [--value-inputs 2 3 6 39 40 41 42 43 44] [--out NAME]
 
 `--object`, `--hand`: where the object's and the hand's positions sit in the observation
 (Meta-World: 4:7, 0:3).
@@ -38,11 +46,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
 from taskforge.agents.dynamics import DynamicsEnsemble  # noqa: E402
+from taskforge.agents.value import TerminalValue  # noqa: E402
 from taskforge.rollouts import evaluate_rows  # noqa: E402
 from taskforge.run import load_checkpoint, load_run  # noqa: E402
 
 BIGGER = {"population": 200, "iterations": 4, "horizon": 15, "elites": 20}
 BINS_MM = ((0, 2), (2, 5), (5, 10), (10, 1000))
+# Meta-World's observation: hand z, gripper, object z, then (tasks' `relative_positions`, last)
+# object - tool and goal - object
+RELATIVE_INPUTS = [2, 3, 6, 39, 40, 41, 42, 43, 44]
 
 
 def distance_mm(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
@@ -105,6 +117,26 @@ def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversam
     return model
 
 
+def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None) -> tuple[TerminalValue, dict[str, float]]:
+    """A fresh terminal value of the run's size fitted as `MPCAgent._fit` fits it (TD(0) on the
+    buffer, target network, the model's input statistics) for `updates` steps on the whole final
+    buffer at once, and its fit's metrics. With `inputs`, it reads only those observation
+    entries: the others are standardised by an infinite spread, so every value they take
+    reaches the network as 0."""
+    n, obs_size = agent.buffer.size, agent.buffer.obs.shape[1]
+    generator = torch.Generator().manual_seed(seed)
+    value = TerminalValue(obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator)
+    std = agent.model.in_std[:obs_size].clone()
+    if inputs is not None:
+        ignored = torch.ones(obs_size, dtype=torch.bool)
+        ignored[inputs] = False
+        std[ignored] = float("inf")
+    optimizer = torch.optim.Adam(value.net.parameters(), lr=agent.mpc.learning_rate)
+    metrics = value.fit(agent.buffer.obs[:n], agent.buffer.rewards[:n], agent.buffer.next_obs[:n], agent.model.in_mean[:obs_size],
+                        std, optimizer, updates, agent.mpc.batch_size, generator)
+    return value, metrics
+
+
 def motion_table(rows: list[dict]) -> None:
     print_table(["object moved (mm)", "transitions", "model error (mm)", "'no motion' error (mm)", "hand: model error", "hand: 'no motion'"],
                 [[f"{r['moved_mm'][0]}-{r['moved_mm'][1]}", r["transitions"], r["model_error_mm"], r["no_motion_error_mm"],
@@ -123,10 +155,14 @@ def main() -> None:
     parser.add_argument("--hidden", type=int, nargs="+", help="the refits' hidden layer sizes (default: the run's)")
     parser.add_argument("--nll-beta", type=float, nargs="+", default=[], help="also a uniform refit fitted by beta-NLL with each beta")
     parser.add_argument("--bigger", action=argparse.BooleanOptionalAction, default=True, help="also plan with a ~10x bigger search")
+    parser.add_argument("--value-refit", type=int, default=0, help="TD(0) steps of two offline refits of the terminal value (0: skip them)")
+    parser.add_argument("--value-inputs", type=int, nargs="+", default=RELATIVE_INPUTS, help="the observation entries the second value refit reads")
     parser.add_argument("--out", help="the result's name under benchmarks/results/ (default: mpc_probe_<run>[_<hidden>])")
     args = parser.parse_args()
     run = load_run(args.run)
     agent = run.agent
+    if args.value_refit and agent.value is None:
+        sys.exit(f"error: {args.run}: --value-refit needs a run with mpc.terminal_value: true (this one plans without a value)")
     obj, hand = (slice(*(int(x) for x in s.split(":"))) for s in (args.object, args.hand))
     agent.load_state_dict(load_checkpoint(args.run / "checkpoint.pt")["agent"])  # the buffer: the final policy file has none
     everything = torch.arange(agent.buffer.size)
@@ -152,27 +188,41 @@ def main() -> None:
         for label, rows in payload["refit"]["errors"].items():
             print(f"\n{label}, held-out 10 %:")
             motion_table(rows)
+    values: dict[str, TerminalValue] = {}
+    if args.value_refit:
+        fits = {}
+        for label, inputs in (("value refit, all inputs", None), (f"value refit, inputs {' '.join(map(str, args.value_inputs))}", args.value_inputs)):
+            start = time.perf_counter()
+            values[label], fits[label] = refit_value(agent, args.value_refit, seed=0, inputs=inputs)
+            print(f"{label}: {args.value_refit} steps in {time.perf_counter() - start:.0f} s, {fits[label]}")
+        payload["value_refit"] = {"updates": args.value_refit, "inputs": args.value_inputs, "fits": fits}
     if args.trials:
-        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits, args.bigger)}
+        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits, args.bigger, values)}
     name = args.out or f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")
     print(f"wrote {write_result(name, payload)}")
 
 
-def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble], bigger: bool = True) -> list[dict]:
-    """Held-out success of the final model with its own planner (and with `BIGGER`), and of each
-    of `refits` with the run's own planner."""
+def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble], bigger: bool = True,
+                     values: dict[str, TerminalValue] | None = None) -> list[dict]:
+    """Held-out success of the final model with its own planner (and with `BIGGER`, and without
+    its terminal value where it has one), of each of `refits` with the run's own planner, and
+    of the run's model and search with each of `values` in place of its own."""
     task, task_file, stages = run.phases[-1]
-    own_model, own_planner = agent.model, agent.spec.planning
-    plans = [("run's model", own_model, "as trained", {})] + ([("run's model", own_model, "bigger search", BIGGER)] if bigger else [])
-    plans += [(label, model, "as trained", {}) for label, model in refits.items()]
+    own_model, own_planner, own_value = agent.model, agent.spec.planning, agent.value
+    plans = [("run's model", own_model, "as trained", {}, own_value)]
+    plans += [("run's model", own_model, "bigger search", BIGGER, own_value)] if bigger else []
+    # is it the terminal value that steers the plans? the same model and search, scored by reward alone
+    plans += [("run's model", own_model, "no terminal value", {}, None)] if own_value is not None else []
+    plans += [(label, model, "as trained", {}, own_value) for label, model in refits.items()]
+    plans += [("run's model", own_model, label, {}, value) for label, value in (values or {}).items()]
     rows = []
-    for model_label, model, planner, change in plans:
-        agent.model, agent.mpc = model, own_planner.model_copy(update=change)
+    for model_label, model, planner, change, value in plans:
+        agent.model, agent.mpc, agent.value = model, own_planner.model_copy(update=change), value
         start = time.perf_counter()
         (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
         rows.append({"model": model_label, "planner": planner, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites"}),
                      "success_rate": result.as_dict()["success_rate"], "seconds": time.perf_counter() - start})
-    agent.model, agent.mpc = own_model, own_planner
+    agent.model, agent.mpc, agent.value = own_model, own_planner, own_value
     print_table(["model", "planner", "population x rounds x horizon", "held-out success", "s"],
                 [[r["model"], r["planner"], f"{r['population']} x {r['iterations']} x {r['horizon']}", f"{r['success_rate']:.2f}", r["seconds"]]
                  for r in rows])

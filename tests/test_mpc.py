@@ -21,7 +21,7 @@ from taskforge.agents.value import TerminalValue
 from taskforge.cli import main
 from taskforge.demos import concatenate, generate, record, save
 from taskforge.envs import TaskEnv, load_task
-from taskforge.run import load_run, read_jsonl
+from taskforge.run import load_checkpoint, load_run, read_jsonl
 from taskforge.spec import AgentSpec, load_agent_spec
 from taskforge.spec.agent import MPCSpec
 from taskforge.training import train
@@ -505,13 +505,13 @@ def test_the_demos_policy_proposes_plans_from_the_first_step_and_survives_a_resu
         assert len(row["missed_goals"]) == round(8 * (1 - row["success"])) and set(row["missed_goals"]) <= set(range(8))
 
 
-def demos_run(folder, task: str, stage: str, episodes: int, planned_steps: int) -> tuple[object, int]:
+def demos_run(folder, task: str, stage: str, episodes: int, planned_steps: int, **mpc) -> tuple[object, int]:
     """A small MPC run warm-started from `episodes` scripted episodes of `stage`, then
-    `planned_steps` of its own: its final checkpoint and how many of its transitions the demos
-    hold (each episode's last observation starts no transition)."""
+    `planned_steps` of its own (`mpc`: changes to its `mpc:` block): its final checkpoint and how
+    many of its transitions the demos hold (each episode's last observation starts no transition)."""
     demos = generate(ROOT / task, stage=stage, episodes=episodes, seed=3)
     save(demos, folder / "demos.npz")
-    agent = {**AGENT, "mpc": {**AGENT["mpc"], "hidden_sizes": [32, 32], "model_updates": 20}}
+    agent = {**AGENT, "mpc": {**AGENT["mpc"], "hidden_sizes": [32, 32], "model_updates": 20, **mpc}}
     (folder / "agent.yaml").write_text(yaml.safe_dump(agent))
     doc = {"name": f"{stage}-probe", "agent": "agent.yaml", "total_steps": demos.num_steps + planned_steps,
            "phases": [{"task": str(ROOT / task), "stages": [stage]}], "warm_start": {"demos": "demos.npz"},
@@ -521,13 +521,14 @@ def demos_run(folder, task: str, stage: str, episodes: int, planned_steps: int) 
     return run / "final.pt", demos.num_steps - demos.num_episodes
 
 
-def probe_windows(tmp_path, monkeypatch, checkpoint, window: int) -> list[dict]:
-    """benchmarks/mpc_data_probe.py's rows for one checkpoint, read back from its results file."""
+def probe_windows(tmp_path, monkeypatch, checkpoint, window: int) -> dict:
+    """benchmarks/mpc_data_probe.py's result for one checkpoint (its step rows under "windows",
+    its episode rows under "episodes"), read back from its results file."""
     monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
     monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(checkpoint), "--window", str(window), "--out", "probe"])
     mpc_data_probe.main()
     (result,) = json.loads((tmp_path / "results/probe.json").read_text())["runs"].values()
-    return result["windows"]
+    return result
 
 
 def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_buffer_oldest_first(tmp_path, monkeypatch):
@@ -543,7 +544,7 @@ def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_bu
 
     (tmp_path / "push").mkdir()
     checkpoint, transitions = demos_run(tmp_path / "push", "tasks/metaworld/push.yaml", "push", episodes=2, planned_steps=400)
-    expert, planned = probe_windows(tmp_path, monkeypatch, checkpoint, transitions)
+    expert, planned = probe_windows(tmp_path, monkeypatch, checkpoint, transitions)["windows"]
     assert (expert["from"], expert["to"], planned["to"]) == (0, transitions, transitions + 400), (expert, planned)
     assert expert["toward_goal"] >= 20 and expert["toward_goal"] >= 0.6 * expert["moved"], expert
     assert planned["toward_goal"] <= 0.25 * expert["toward_goal"], planned  # measured: 55 of 58 moves, then 0 of 1
@@ -560,11 +561,24 @@ def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_bu
 def test_the_data_probe_counts_the_steps_a_scripted_pick_lifts_the_puck(tmp_path, monkeypatch):
     """The probe's lift count on a real pick run warm-started from one scripted pick of
     Meta-World's puck: the demo lifts it (measured: 11 steps of more than 5 mm), with the hand
-    at the puck in most of its steps; the untrained planner's 400 steps after it do not."""
+    at the puck in most of its steps; the untrained planner's 400 steps after it do not. Its
+    episode table finds the demo's one episode in the first window, whole, the hand at the puck
+    and the puck lifted, and the planner's four envs' unfinished episodes (100 steps each) in
+    the next, none of them lifting it."""
     checkpoint, transitions = demos_run(tmp_path, "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400)
-    expert, *planned = probe_windows(tmp_path, monkeypatch, checkpoint, transitions)
+    result = probe_windows(tmp_path, monkeypatch, checkpoint, transitions)
+    expert, *planned = result["windows"]
     assert expert["rose"] >= 5 and expert["at_object"] >= 0.5 * transitions, expert
     assert sum(row["rose"] for row in planned) <= 1, planned  # measured: 0
+    demo, *own = result["episodes"]
+    assert (demo["episodes"], demo["reached"], demo["lifted"]) == (1, 1, 1), demo
+    assert sum(row["episodes"] for row in own) == 4 and sum(row["lifted"] for row in own) == 0, own
+
+    before = np.arange(12.0).reshape(6, 2)  # two envs interleaved, three steps each
+    after = before + 4.0  # each step's next observation begins the same env's next step
+    after[2] = -1.0  # env 0's second step ended its episode: its next observation begins none
+    chains = mpc_data_probe.episodes(before, after)
+    assert [chain.tolist() for chain in chains] == [[0, 2], [1, 3, 5], [4]], chains
 
 
 def test_the_model_probe_bins_the_whole_buffer_refits_it_and_plans_with_each_model(tmp_path, monkeypatch):
@@ -590,6 +604,44 @@ def test_the_model_probe_bins_the_whole_buffer_refits_it_and_plans_with_each_mod
         assert learnt < 0.85 * still, (label, rows)  # measured 0.56, 0.80, 0.56 of "no motion"
     assert [(row["model"], row["planner"]) for row in result["planners"]] == [("run's model", "as trained")] + [(label, "as trained") for label in refits]
     assert all(row["success_rate"] in (0.0, 1.0) for row in result["planners"]), result["planners"]
+
+
+def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_inputs(tmp_path, monkeypatch):
+    """benchmarks/mpc_probe.py's value refits on a real pick run with a terminal value,
+    warm-started from one scripted pick: the refit learns from the buffer's rewards (it values
+    the demo's states, which earned the pick reward, above the untrained planner's); the one
+    narrowed to `--value-inputs` gives the same value whatever the hand's x and y, the full
+    one does not; each plans the held-out goal, after the run's own value and none. A run
+    without a value is a one-line error, before any work."""
+    (tmp_path / "plain").mkdir()
+    plain, _ = demos_run(tmp_path / "plain", "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400)
+    monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(plain.parent), "--value-refit", "10"])
+    with pytest.raises(SystemExit, match="needs a run with mpc.terminal_value: true"):
+        mpc_probe.main()
+
+    checkpoint, transitions = demos_run(tmp_path, "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400,
+                                        terminal_value=True, discount=0.9)
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "1", "--no-bigger",
+                                     "--value-refit", "300", "--out", "probe"])
+    mpc_probe.main()
+    result = json.loads((tmp_path / "results/probe.json").read_text())
+    narrowed = f"value refit, inputs {' '.join(map(str, mpc_probe.RELATIVE_INPUTS))}"
+    assert [row["planner"] for row in result["planners"]] == ["as trained", "no terminal value", "value refit, all inputs", narrowed]
+    assert result["value_refit"]["updates"] == 300 and set(result["value_refit"]["fits"]) == {"value refit, all inputs", narrowed}
+
+    agent = load_run(checkpoint).agent
+    agent.load_state_dict(load_checkpoint(checkpoint.parent / "checkpoint.pt")["agent"])
+    obs = agent.buffer.obs[: agent.buffer.size]
+    moved = obs.clone()
+    moved[:, :2] += 0.05  # the hand 5 cm along x and y, all else as it was
+    for inputs in (None, mpc_probe.RELATIVE_INPUTS):
+        value, _ = mpc_probe.refit_value(agent, 300, seed=0, inputs=inputs)
+        with torch.no_grad():
+            demo, own = value(obs[:transitions]).mean(), value(obs[transitions:]).mean()
+            shift = (value(moved) - value(obs)).abs().max()
+        assert demo > own, (inputs, demo, own)
+        assert (shift == 0) if inputs else (shift > 0), (inputs, shift)
 
 
 def test_optimism_plans_toward_what_the_model_has_not_seen_and_pessimism_away_from_it(tmp_path):
