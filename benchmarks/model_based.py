@@ -17,6 +17,10 @@ Variants (benchmarks/configs/, one file each) and the goals of issue 23:
   setting: Meta-World's own reward, no randomisation (configs/pick_place_native.yaml);
   `mpc-pick-place-native-beta` that with the model fitted by β-NLL (agents/mpc_beta.yaml: under
   PETS's plain likelihood the native run's model never learnt the puck's motion);
+  `mpc-pick-place-native-beta-refit` a branch of that run at 400k (its model, value and data)
+  going on with the value refitted afresh every 50k steps (agents/mpc_beta_refit.yaml); its
+  snapshot is `runs/model_based/branch_points/mpc-pick-place-native-beta-seed<seed>-400k/`, a copy
+  of that run's checkpoint at 400k, local like every checkpoint;
 - `mpc-pick-place-demos`: the same with 50 scripted episodes seeding the model, 100k; >= 0.95
   within 100k (PPO with demos: benchmarks/warm_start.py); `mpc-pick-place-demos-prior` the same
   with a policy cloned from the demos proposing plans (agents/mpc_demos.yaml).
@@ -50,12 +54,15 @@ class Variant:
     """One row of the benchmark: its config (benchmarks/configs/), the task its plot panel shows,
     the stage its held-out success is read on (a push run evaluates `reach` until it is promoted;
     those points are not push's curve), its budget in env steps and issue 23's held-out goal
-    (None for the PPO references)."""
+    (None for the PPO references). A branch (`branched_at` > 0) starts from a snapshot of
+    another run at that many env steps (its config's `init_from`: model, value and data); its
+    steps, curve and budget count from the snapshot's, so it plots beside the run it left."""
 
     task: str
     stage: str
     budget: int
     goal: float | None
+    branched_at: int = 0
 
     def config(self, name: str) -> Path:
         """The variant's config file: its name with underscores (`mpc-push` -> `mpc_push.yaml`)."""
@@ -75,6 +82,7 @@ VARIANTS: dict[str, Variant] = {
     "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-native": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-native-beta": Variant("pick-place", "place", 1_000_000, 0.80),
+    "mpc-pick-place-native-beta-refit": Variant("pick-place", "place", 1_000_000, 0.80, branched_at=400_000),
     "mpc-pick-place-demos": Variant("pick-place", "place", 100_000, 0.95),
     "mpc-pick-place-demos-prior": Variant("pick-place", "place", 100_000, 0.95),
 }
@@ -96,9 +104,9 @@ def summary(variant: str, seed: int, run_dir: Path) -> dict:
     run, spec = RunDir(run_dir), VARIANTS[variant]
     metrics = run.read_metrics()
     rates = [m["steps_per_s"] for m in metrics if "steps_per_s" in m]
-    points = curve(metrics, spec.stage)
+    points = [(step + spec.branched_at, success) for step, success in curve(metrics, spec.stage)]
     return {
-        "variant": variant, "seed": seed, "steps_done": run.steps_done(), "budget": spec.budget, "curve": points,
+        "variant": variant, "seed": seed, "steps_done": run.steps_done() + spec.branched_at, "budget": spec.budget, "curve": points,
         "best": max((s for _, s in points), default=None), "end": points[-1][1] if points else None,
         "first_at_goal": next((step for step, s in points if spec.goal is not None and s >= spec.goal), None),
         "ms_per_env_step": 1000.0 / float(np.median(rates)) if rates else None,
@@ -146,8 +154,8 @@ def main() -> None:
             for seed in args.seeds:
                 start = time.perf_counter()
                 spec = VARIANTS[variant]
-                step = advance_run(spec.config(variant), RUNS / f"{variant}-seed{seed}", seed, spec.budget, args.chunk_steps)
-                print(f"{variant} seed {seed}: {step:,} / {spec.budget:,} steps ({time.perf_counter() - start:.0f} s this call)",
+                own = advance_run(spec.config(variant), RUNS / f"{variant}-seed{seed}", seed, spec.budget - spec.branched_at, args.chunk_steps)
+                print(f"{variant} seed {seed}: {own + spec.branched_at:,} / {spec.budget:,} steps ({time.perf_counter() - start:.0f} s this call)",
                       flush=True)
     runs = runs_on_disk()
     rows = [[name, f"{r['steps_done']:,} / {r['budget']:,}", "-" if r["end"] is None else f"{r['end']:.2f}",

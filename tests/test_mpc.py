@@ -267,33 +267,87 @@ def test_after_a_promotion_the_reward_learns_from_the_new_stage_alone(tmp_path):
     assert other.stage is None and len(other.buffer.rows_of(None)) == len(other.buffer.rows_of(0)) == agent.buffer.size
 
 
+def _point_mass_walks(episodes: int = 40, length: int = 50) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Random walks of a point mass toward random goals: observations (position, goal), actions,
+    the distance to the goal at each step, and the episode starts."""
+    rng = np.random.default_rng(0)
+    goal = rng.uniform(-1, 1, (episodes, 1, 2))
+    steps = rng.uniform(-1, 1, (episodes, length, 2))
+    position = np.clip(rng.uniform(-1, 1, (episodes, 1, 2)) + 0.05 * np.cumsum(steps, axis=1), -1.5, 1.5)
+    obs = np.concatenate([position, np.broadcast_to(goal, position.shape)], axis=2).reshape(-1, 4).astype(np.float32)
+    distance = np.linalg.norm(obs[:, :2] - obs[:, 2:], axis=1).astype(np.float32)
+    return obs, steps.reshape(-1, 2).astype(np.float32), distance, np.arange(len(obs)) % length == 0
+
+
+def _value_agent(**mpc) -> MPCAgent:
+    """A point-mass MPC agent with a small terminal value (`mpc` overrides)."""
+    spec = AgentSpec.model_validate({"name": "v", "algo": "mpc", "mpc": {
+        "ensemble_size": 2, "hidden_sizes": [32, 32], "particles": 2, "discount": 0.9, "terminal_value": True,
+        "model_updates": 400, "value_tau": 0.05} | mpc})
+    return MPCAgent(spec, Box(-np.inf, np.inf, (4,), np.float32), Box(-1.0, 1.0, (2,), np.float32), seed=0)
+
+
+def _ranks_by_closeness(agent: MPCAgent, obs: np.ndarray, distance: np.ndarray) -> float:
+    """The correlation of the agent's V with minus the distance to the goal on `obs`."""
+    with torch.no_grad():
+        value = agent.value(torch.as_tensor(obs))
+    return torch.corrcoef(torch.stack([value, -torch.as_tensor(distance)]))[0, 1].item()
+
+
 def test_the_terminal_value_learns_from_the_stage_being_trained_alone():
     """The value, like the reward, fits the stage being trained's rows. The same random walks of
     a point mass are in the buffer twice: as the reach stage's episodes (reward: minus the
     distance to the goal) and as an earlier stage's that paid for the distance itself. Trained
     on reach, the value ranks those states as reach does, by closeness to the goal; fitted on
     every row, the two rewards cancel on the same states and it ranks them by nothing."""
-    rng = np.random.default_rng(0)
-    episodes, length = 40, 50
-    goal = rng.uniform(-1, 1, (episodes, 1, 2))
-    steps = rng.uniform(-1, 1, (episodes, length, 2))
-    position = np.clip(rng.uniform(-1, 1, (episodes, 1, 2)) + 0.05 * np.cumsum(steps, axis=1), -1.5, 1.5)
-    obs = np.concatenate([position, np.broadcast_to(goal, position.shape)], axis=2).reshape(-1, 4).astype(np.float32)
-    distance = np.linalg.norm(obs[:, :2] - obs[:, 2:], axis=1).astype(np.float32)
-    starts = np.arange(len(obs)) % length == 0
-    spec = AgentSpec.model_validate({"name": "v", "algo": "mpc", "mpc": {
-        "ensemble_size": 2, "hidden_sizes": [32, 32], "particles": 2, "discount": 0.9, "terminal_value": True,
-        "model_updates": 400, "value_tau": 0.05}})
-    agent = MPCAgent(spec, Box(-np.inf, np.inf, (4,), np.float32), Box(-1.0, 1.0, (2,), np.float32), seed=0)
-    actions = steps.reshape(-1, 2).astype(np.float32)
+    obs, actions, distance, starts = _point_mass_walks()
+    agent = _value_agent()
     agent.add_demonstrations(obs, actions, -distance, starts, "reach")  # the stage trained
     agent.add_demonstrations(obs, actions, distance, starts, "away")
     metrics = agent.update()
     assert metrics["reward_rows"] == metrics["buffer_size"] / 2
-    with torch.no_grad():
-        value = agent.value(torch.as_tensor(obs))
     # measured: correlation with -distance 0.99; with the value fitted on every row, 0.30
-    assert torch.corrcoef(torch.stack([value, -torch.as_tensor(distance)]))[0, 1] > 0.8
+    assert _ranks_by_closeness(agent, obs, distance) > 0.8
+
+
+def test_a_fresh_refit_of_the_value_forgets_what_it_learnt_before(tmp_path):
+    """`value_refit_every`: a V that learnt the opposite of the reward (the primacy bias in its
+    sharpest form: it paid for the distance, the stage pays for closeness) is not undone by the
+    online fit's few steps; a fresh refit is, at the first fit and at each multiple of the period,
+    not between them. The count of refits survives a checkpoint."""
+    obs, actions, distance, starts = _point_mass_walks()
+
+    def misled(agent: MPCAgent) -> MPCAgent:  # V fitted to the opposite reward, on the same states
+        x = torch.as_tensor(obs)
+        agent.value.fit(x, torch.as_tensor(distance), x, x.mean(0), x.std(0), agent.value_optimizer, 1500, 256, agent.generator)
+        assert _ranks_by_closeness(agent, obs, distance) < -0.5
+        return agent
+
+    # measured: misled -1.00; after 30 online steps still -1.00; after each fresh refit +0.99
+    online = misled(_value_agent(model_updates=30))
+    online.add_demonstrations(obs, actions, -distance, starts, "reach")
+    assert "value_refit" not in online.update()
+    assert _ranks_by_closeness(online, obs, distance) < 0.5  # 30 online steps leave it misled
+
+    refits = _value_agent(model_updates=30, value_refit_every=1000, value_refit_updates=1500)
+    refits.add_demonstrations(obs, actions, -distance, starts, "reach")
+    assert refits.update()["value_refit"] == 1.0  # the first fit: a fresh V on the whole buffer
+    assert _ranks_by_closeness(refits, obs, distance) > 0.8
+    misled(refits).global_step = 999
+    assert "value_refit" not in refits.update()  # between refits the online fit goes on from it
+    assert _ranks_by_closeness(refits, obs, distance) < 0.5
+    torch.save(refits.state_dict(), tmp_path / "agent.pt")
+    resumed = _value_agent(model_updates=30, value_refit_every=1000, value_refit_updates=1500)
+    resumed.load_state_dict(torch.load(tmp_path / "agent.pt", weights_only=True))
+    resumed.global_step = 1000  # a multiple of the period passed: refitted afresh
+    assert resumed.update()["value_refit"] == 1.0
+    assert _ranks_by_closeness(resumed, obs, distance) > 0.8
+    assert "value_refit" not in resumed.update()
+
+
+def test_a_value_refit_needs_a_value():
+    with pytest.raises(ValueError, match="'value_refit_every' .* needs 'terminal_value: true'"):
+        MPCSpec(value_refit_every=1000)
 
 
 def test_the_random_first_trial_lasts_random_steps_across_fits_and_not_after_demos(tmp_path):

@@ -34,20 +34,22 @@ CONTINUE_A_RUN = {
     "benchmarks/configs/ml1_reach_rl2_zone_box_from_plane_long.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-plane-seed0",
     "benchmarks/configs/ml1_reach_rl2_zone_find_deep.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-find-mid-seed0",
     "benchmarks/configs/ml1_reach_rl2_zone_find_more.yaml": ROOT / "benchmarks/runs/rl2/rl2-reach-zone-find-mid-seed0",
+    "benchmarks/configs/mpc_pick_place_native_beta_refit.yaml": ROOT / "benchmarks/runs/model_based/branch_points/mpc-pick-place-native-beta-seed0-400k",
 }
 """Curricula whose `init_from` names a benchmark run that a fresh clone does not hold (final
-policies are not committed): until that run exists, `validate` must refuse them in one line."""
+policies and checkpoints are not committed): until that run exists, `validate` must refuse them
+in one line."""
 
 
 @pytest.mark.parametrize("relpath", SHIPPED)
 def test_shipped_file_validates(relpath, capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
     source = CONTINUE_A_RUN.get(relpath)
-    if source is not None and not (source / "final.pt").is_file():
+    if source is not None and not any((source / name).is_file() for name in ("final.pt", "checkpoint.pt")):
         assert main(["validate", relpath]) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"error: {relpath}: init_from: ") and "does not fit" not in err, err
-        pytest.skip(f"init_from names {source.name}, which has no final policy here (run it first)")
+        pytest.skip(f"init_from names {source.name}, which has no policy here (run it first)")
     assert main(["validate", relpath]) == 0
     out = capsys.readouterr()
     assert f"{relpath}: ok" in out.out

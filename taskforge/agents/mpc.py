@@ -11,7 +11,8 @@ Reading order of one training iteration (the trainer drives it like PPO: `collec
    that ended, from `final_obs`) goes into the buffer, tagged with its episode's stage.
 2. `update`: standardisation statistics refitted on the whole buffer, then `model_updates`
    Adam steps, each member on its own bootstrap draw of `batch_size` transitions; with
-   `terminal_value`, as many TD(0) steps on the value (`value.py`) that scores plans' last states.
+   `terminal_value`, as many TD(0) steps on the value (`value.py`) that scores plans' last states
+   (with `value_refit_every`, now and then a fresh V fitted on the whole buffer instead).
    The motion is learnt from every transition, the reward and the value from those of the stage
    being trained (that of the latest episode started, replays of earlier stages aside). Why: a
    curriculum changes the reward, not the physics, and the rows of an earlier stage carry its
@@ -145,9 +146,9 @@ class MPCAgent:
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=self.mpc.learning_rate, weight_decay=self.mpc.weight_decay)
         self.buffer = TransitionBuffer(self.mpc.buffer_size, obs_size, self.action_size)
         self.value: TerminalValue | None = None
+        self.value_refits = 0  # fresh refits of the value so far (`mpc.value_refit_every`)
         if self.mpc.terminal_value:
-            self.value = TerminalValue(obs_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau, self.generator).to(self.device)
-            self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
+            self._new_value()
         self.prior: PolicyPrior | None = None
         if self.mpc.prior_trajectories:  # fitted by `fit_prior` at the warm start
             self.prior = PolicyPrior(obs_size, self.action_size, self.mpc.hidden_sizes, self.generator).to(self.device)
@@ -311,6 +312,13 @@ class MPCAgent:
             if stage is not None and not bool(infos.get("replay", np.zeros(i + 1, bool))[i]):
                 self.stage = self._tag(stage)
 
+    def _new_value(self) -> None:
+        """V and its optimizer from new weights (drawn from `generator`): at the start, and at
+        each fresh refit."""
+        self.value = TerminalValue(self.observation_space.shape[0], self.mpc.hidden_sizes, self.mpc.discount,
+                                   self.mpc.value_tau, self.generator).to(self.device)
+        self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
+
     def update(self) -> dict[str, float]:
         """Fit the model on the buffer (module doc, 2.); its losses as metrics."""
         if self.buffer.size == 0:
@@ -352,9 +360,19 @@ class MPCAgent:
         if self.value is not None:  # obs and rewards are on the device already, in the fit's data
             stage = slice(None) if every_row else rows  # a slice copies nothing
             landed = self.buffer.next_obs[: self.buffer.size].to(self.device)[stage]
+            updates = mpc.model_updates
+            # Fresh refit (`mpc.value_refit_every`; Nikishin et al. 2022's reset against the primacy
+            # bias): at the first fit and at each multiple of the period passed, V starts from new
+            # weights and fits the whole stage's data at once; the fits between go on from it.
+            if mpc.value_refit_every and self.global_step // mpc.value_refit_every >= self.value_refits:
+                self._new_value()
+                self.value_refits = self.global_step // mpc.value_refit_every + 1
+                updates = mpc.value_refit_updates
+                metrics["value_refit"] = 1.0
+            assert self.value is not None
             metrics |= self.value.fit(inputs[stage, :obs_size], targets[stage, obs_size], landed,
                                       model.in_mean[:obs_size], model.in_std[:obs_size], self.value_optimizer,
-                                      mpc.model_updates, batch, self.generator)
+                                      updates, batch, self.generator)
         return metrics
 
     def add_demonstrations(self, observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
@@ -393,7 +411,8 @@ class MPCAgent:
         state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
                  "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
                  "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets,
-                 "data_given": self.data_given, "stage_names": list(self.stage_names), "stage": self.stage}
+                 "data_given": self.data_given, "stage_names": list(self.stage_names), "stage": self.stage,
+                 "value_refits": self.value_refits}
         if self.plan_generator is not self.generator:
             state |= {"plan_generator": self.plan_generator.get_state(), "plan_device": self.device.type}
         if self.value is not None:
@@ -449,4 +468,5 @@ class MPCAgent:
         self.data_given = state.get("data_given", self.num_updates > 0)
         # checkpoints from before the stage tags: every row untagged, no stage named
         self.stage_names, self.stage = list(state.get("stage_names", [])), state.get("stage")
+        self.value_refits = state.get("value_refits", 0)  # from before the refits: none done
         self._obs = None  # the envs are not the agent's: the next collect() resets them
