@@ -268,7 +268,7 @@ def test_after_a_promotion_the_reward_learns_from_the_new_stage_alone(tmp_path):
 
 
 def _point_mass_walks(episodes: int = 40, length: int = 50) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Random walks of a point mass toward random goals: observations (position, goal), actions,
+    """Random walks of a point mass, each with a random goal: observations (position, goal), actions,
     the distance to the goal at each step, and the episode starts."""
     rng = np.random.default_rng(0)
     goal = rng.uniform(-1, 1, (episodes, 1, 2))

@@ -3,9 +3,13 @@ surface only hours into a benchmark), and `validate` / `tasks` summarise them.""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from taskforge.cli import main
+from taskforge.run import RunDir
+from taskforge.spec import SpecError
 from tests.conftest import ROOT
 
 SHIPPED = sorted(
@@ -41,11 +45,20 @@ policies and checkpoints are not committed): until that run exists, `validate` m
 in one line."""
 
 
+def _holds_a_policy(source: Path) -> bool:
+    """Whether `init_from` would find a policy in the run directory `source` (`RunDir`'s rule)."""
+    try:
+        RunDir(source).policy_checkpoint()
+    except SpecError:
+        return False
+    return True
+
+
 @pytest.mark.parametrize("relpath", SHIPPED)
 def test_shipped_file_validates(relpath, capsys, monkeypatch):
     monkeypatch.chdir(ROOT)
     source = CONTINUE_A_RUN.get(relpath)
-    if source is not None and not any((source / name).is_file() for name in ("final.pt", "checkpoint.pt")):
+    if source is not None and not _holds_a_policy(source):
         assert main(["validate", relpath]) == 2
         err = capsys.readouterr().err
         assert err.startswith(f"error: {relpath}: init_from: ") and "does not fit" not in err, err
