@@ -350,6 +350,36 @@ def test_a_value_refit_needs_a_value():
         MPCSpec(value_refit_every=1000)
 
 
+def test_a_checkpoint_saves_each_observation_once_and_restores_the_buffer_bit_for_bit(tmp_path):
+    """The point-mass task's real collections (4 envs, 20-step episodes, a buffer of 1,000 rows
+    overwritten past its capacity): every `next_obs` but those an episode ended on (and the 4
+    newest, whose landing is no row yet) repeats a row's `obs`, so the checkpoint saves it as a link. Loaded, every row is restored exactly,
+    and a checkpoint from before the links (every `next_obs` saved) loads the same."""
+    write(tmp_path, total_steps=1400, mpc={"random_steps": 1400, "steps_per_update": 1400, "buffer_size": 1000})
+    spec, task = load_agent_spec(tmp_path / "agent.yaml"), load_task(tmp_path / "task.yaml")
+    envs = make_vector_env([lambda: TaskEnv(task, tmp_path / "task.yaml") for _ in range(4)], spec.runtime)
+    agent = MPCAgent(spec, envs.single_observation_space, envs.single_action_space, seed=0)
+    agent.collect(envs)
+    envs.close()
+    buffer = agent.buffer
+    assert buffer.size == 1000 and buffer.cursor == 400  # the ring wrapped
+    torch.save(buffer.state_dict(), tmp_path / "buffer.pt")
+    saved = torch.load(tmp_path / "buffer.pt", weights_only=True)
+    # ~1 row in 20 ended an episode: only those (and the newest 4) are saved whole
+    assert 40 <= len(saved["next_obs"]) < 0.1 * buffer.size
+    linked = saved["landed_at"] >= 0
+    assert torch.equal(buffer.next_obs[:1000][linked], buffer.obs[saved["landed_at"][linked].long()])
+
+    old_style = {**saved, "next_obs": buffer.next_obs[:1000].clone()}
+    del old_style["landed_at"]
+    for state in (saved, old_style):
+        restored = TransitionBuffer(1000, buffer.obs.shape[1], buffer.actions.shape[1])
+        restored.load_state_dict(state)
+        for field in ("obs", "actions", "rewards", "next_obs", "stages"):
+            assert torch.equal(getattr(restored, field), getattr(buffer, field)), field
+        assert (restored.size, restored.cursor) == (buffer.size, buffer.cursor)
+
+
 def test_the_random_first_trial_lasts_random_steps_across_fits_and_not_after_demos(tmp_path):
     """`random_steps` 200 with a fit every 100: both first collections are random (the planner is
     never asked), the third plans every step; an agent whose data was given (demos) plans at once."""

@@ -119,13 +119,27 @@ class TransitionBuffer:
         return torch.cat([obs, act], dim=-1), targets
 
     def state_dict(self) -> dict:
+        """The filled rows, each `next_obs` that repeats a row's `obs` bit for bit saved as that
+        row's index (`landed_at`; -1 where it repeats none: the rows an episode ended on, saved in
+        `next_obs`). Why: while an env's episode goes on, where it landed is its next row's
+        observation, so a plain copy saves every observation twice, and a long benchmark that spans
+        sessions resumes from a committed checkpoint (benchmarks/RESULTS.md): this halves it,
+        losslessly."""
         n = self.size
+        obs, landed = self.obs[:n].numpy(), self.next_obs[:n].numpy()
+        row_of = {row.tobytes(): i for i, row in enumerate(obs)}
+        landed_at = torch.as_tensor([row_of.get(row.tobytes(), -1) for row in landed], dtype=torch.int32)
         return {"obs": self.obs[:n].clone(), "actions": self.actions[:n].clone(), "rewards": self.rewards[:n].clone(),
-                "next_obs": self.next_obs[:n].clone(), "stages": self.stages[:n].clone(), "cursor": self.cursor}
+                "landed_at": landed_at, "next_obs": self.next_obs[:n][landed_at < 0].clone(),
+                "stages": self.stages[:n].clone(), "cursor": self.cursor}
 
     def load_state_dict(self, state: dict) -> None:
         n = len(state["rewards"])
-        self.obs[:n], self.actions[:n], self.rewards[:n], self.next_obs[:n] = state["obs"], state["actions"], state["rewards"], state["next_obs"]
+        self.obs[:n], self.actions[:n], self.rewards[:n] = state["obs"], state["actions"], state["rewards"]
+        landed_at = state.get("landed_at", torch.full((n,), -1, dtype=torch.int32))  # before the links: every row saved
+        linked = landed_at >= 0
+        self.next_obs[:n][linked] = self.obs[landed_at[linked].long()]
+        self.next_obs[:n][~linked] = state["next_obs"]
         self.stages[:n] = state.get("stages", torch.full((n,), UNTAGGED, dtype=torch.int16))
         self.size, self.cursor = n, state["cursor"]
 
@@ -407,7 +421,8 @@ class MPCAgent:
 
     def state_dict(self) -> dict:
         """Model, optimizer, data, RNG and counters: tensors and plain values only (loads with
-        `torch.load(weights_only=True)`). The buffer is saved whole: a resumed run refits on it."""
+        `torch.load(weights_only=True)`). The buffer is saved whole, each observation once
+        (`TransitionBuffer.state_dict`): a resumed run refits on it."""
         state = {"model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(),
                  "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
                  "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets,
