@@ -353,8 +353,9 @@ def test_a_value_refit_needs_a_value():
 def test_a_checkpoint_saves_each_observation_once_and_restores_the_buffer_bit_for_bit(tmp_path):
     """The point-mass task's real collections (4 envs, 20-step episodes, a buffer of 1,000 rows
     overwritten past its capacity): every `next_obs` but those an episode ended on (and the 4
-    newest, whose landing is no row yet) repeats a row's `obs`, so the checkpoint saves it as a link. Loaded, every row is restored exactly,
-    and a checkpoint from before the links (every `next_obs` saved) loads the same."""
+    newest, whose landing is no row yet) repeats a row's `obs`, so the checkpoint saves it as a
+    link. Loaded, every row is restored exactly, and a checkpoint from before the links (every
+    `next_obs` saved) loads the same."""
     write(tmp_path, total_steps=1400, mpc={"random_steps": 1400, "steps_per_update": 1400, "buffer_size": 1000})
     spec, task = load_agent_spec(tmp_path / "agent.yaml"), load_task(tmp_path / "task.yaml")
     envs = make_vector_env([lambda: TaskEnv(task, tmp_path / "task.yaml") for _ in range(4)], spec.runtime)
