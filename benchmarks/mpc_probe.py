@@ -23,11 +23,18 @@
    observation's entries `--value-inputs` (default: Meta-World's hand and object heights, the
    gripper and `object - tool, goal - object`: where the hand is relative to the puck and the
    puck to the goal, not where on the table), each planning with the run's model and search.
+   `--value-heads K` adds a fit of K heads (`mpc.value_ensemble`), planning on their mean minus
+   each `--value-pessimism` x their std (`mpc.value_pessimism`): does a pessimistic V keep the
+   planner from exploiting states V overrates? `--heads-alone N` plans with each of the first N
+   heads alone too (is the heads' mean better than one V because it averages them?). `--rows N` fits every value on the buffer's first
+   N transitions (the data a refit at env step N saw; `--value-inputs` with no entries skips the
+   second fit).
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
                                    [--nll-beta 0.5] [--no-bigger] [--value-refit 40000]
-                                   [--value-inputs 2 3 6 39 40 41 42 43 44] [--out NAME]
+                                   [--value-inputs 2 3 6 39 40 41 42 43 44] [--value-heads 5]
+                                   [--value-pessimism 0 1 2] [--heads-alone 2] [--rows 100000] [--out NAME]
 
 `--object`, `--hand`: where the object's and the hand's positions sit in the observation
 (Meta-World: 4:7, 0:3).
@@ -36,6 +43,7 @@
 from __future__ import annotations
 
 import argparse
+import copy
 import sys
 import time
 from pathlib import Path
@@ -117,15 +125,17 @@ def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversam
     return model
 
 
-def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None) -> tuple[TerminalValue, dict[str, float]]:
+def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None, rows: int | None = None,
+                heads: int = 1, pessimism: float = 0.0) -> tuple[TerminalValue, dict[str, float]]:
     """A fresh terminal value of the run's size fitted as `MPCAgent._fit` fits it (TD(0) on the
-    buffer, target network, the model's input statistics) for `updates` steps on the whole final
-    buffer at once, and its fit's metrics. With `inputs`, it reads only those observation
-    entries: the others are standardised by an infinite spread, so every value they take
-    reaches the network as 0."""
-    n, obs_size = agent.buffer.size, agent.buffer.obs.shape[1]
+    buffer, target network, the model's input statistics) for `updates` steps on the buffer's
+    first `rows` transitions (default: all of them) at once, and its fit's metrics. With
+    `inputs`, it reads only those observation entries: the others are standardised by an
+    infinite spread, so every value they take reaches the network as 0. `heads` and
+    `pessimism`: `mpc.value_ensemble` and `mpc.value_pessimism`."""
+    n, obs_size = rows or agent.buffer.size, agent.buffer.obs.shape[1]
     generator = torch.Generator().manual_seed(seed)
-    value = TerminalValue(obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator)
+    value = TerminalValue(obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator, heads, pessimism)
     std = agent.model.in_std[:obs_size].clone()
     if inputs is not None:
         ignored = torch.ones(obs_size, dtype=torch.bool)
@@ -135,6 +145,17 @@ def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None)
     metrics = value.fit(agent.buffer.obs[:n], agent.buffer.rewards[:n], agent.buffer.next_obs[:n], agent.model.in_mean[:obs_size],
                         std, optimizer, updates, agent.mpc.batch_size, generator)
     return value, metrics
+
+
+def one_head(value: TerminalValue, head: int) -> TerminalValue:
+    """Head `head` of a value of several, as a V of its own (a value refit of one head is one
+    such draw: is what the heads' mean plans a lucky draw or their average?)."""
+    alone = copy.deepcopy(value)
+    for slow, fast in zip(alone.target, alone.net):
+        for layer in (slow, fast):
+            layer.weight, layer.bias = (torch.nn.Parameter(p[head : head + 1].detach().clone()) for p in (layer.weight, layer.bias))
+    alone.heads = 1
+    return alone
 
 
 def motion_table(rows: list[dict]) -> None:
@@ -156,7 +177,11 @@ def main() -> None:
     parser.add_argument("--nll-beta", type=float, nargs="+", default=[], help="also a uniform refit fitted by beta-NLL with each beta")
     parser.add_argument("--bigger", action=argparse.BooleanOptionalAction, default=True, help="also plan with a ~10x bigger search")
     parser.add_argument("--value-refit", type=int, default=0, help="TD(0) steps of two offline refits of the terminal value (0: skip them)")
-    parser.add_argument("--value-inputs", type=int, nargs="+", default=RELATIVE_INPUTS, help="the observation entries the second value refit reads")
+    parser.add_argument("--value-inputs", type=int, nargs="*", default=RELATIVE_INPUTS, help="the observation entries the second value refit reads (none: skip it)")
+    parser.add_argument("--value-heads", type=int, default=1, help="also a value refit of this many heads (1: none)")
+    parser.add_argument("--value-pessimism", type=float, nargs="+", default=[0.0], help="plan with the heads' mean minus each of these x their std")
+    parser.add_argument("--heads-alone", type=int, default=0, help="also plan with each of the first N of those heads alone")
+    parser.add_argument("--rows", type=int, help="fit the values on the buffer's first ROWS transitions (default: all)")
     parser.add_argument("--out", help="the result's name under benchmarks/results/ (default: mpc_probe_<run>[_<hidden>])")
     args = parser.parse_args()
     run = load_run(args.run)
@@ -165,6 +190,8 @@ def main() -> None:
         sys.exit(f"error: {args.run}: --value-refit needs a run with mpc.terminal_value: true (this one plans without a value)")
     obj, hand = (slice(*(int(x) for x in s.split(":"))) for s in (args.object, args.hand))
     agent.load_state_dict(load_checkpoint(args.run / "checkpoint.pt")["agent"])  # the buffer: the final policy file has none
+    if args.rows is not None and not 0 < args.rows <= agent.buffer.size:
+        sys.exit(f"error: {args.run}: --rows {args.rows} must be in 1..{agent.buffer.size} (the transitions its buffer holds)")
     everything = torch.arange(agent.buffer.size)
     motion = object_motion_errors(agent, agent.model, obj, everything, hand=hand)
     motion_table(motion)
@@ -190,12 +217,24 @@ def main() -> None:
             motion_table(rows)
     values: dict[str, TerminalValue] = {}
     if args.value_refit:
-        fits = {}
-        for label, inputs in (("value refit, all inputs", None), (f"value refit, inputs {' '.join(map(str, args.value_inputs))}", args.value_inputs)):
+        fits, heads = {}, args.value_heads
+        runs = [("value refit, all inputs", None, 1)]
+        runs += [(f"value refit, inputs {' '.join(map(str, args.value_inputs))}", args.value_inputs, 1)] if args.value_inputs else []
+        runs += [(f"value refit, {heads} heads", None, heads)] if heads > 1 else []
+        for label, inputs, count in runs:
             start = time.perf_counter()
-            values[label], fits[label] = refit_value(agent, args.value_refit, seed=0, inputs=inputs)
+            value, fits[label] = refit_value(agent, args.value_refit, seed=0, inputs=inputs, rows=args.rows, heads=count)
             print(f"{label}: {args.value_refit} steps in {time.perf_counter() - start:.0f} s, {fits[label]}")
-        payload["value_refit"] = {"updates": args.value_refit, "inputs": args.value_inputs, "fits": fits}
+            if count == 1:
+                values[label] = value
+                continue
+            for kappa in args.value_pessimism:  # the same heads, scored by mean - kappa x std
+                values[f"{label}, mean - {kappa:g} std"] = copy.copy(value)
+                values[f"{label}, mean - {kappa:g} std"].pessimism = kappa
+            for head in range(min(args.heads_alone, count)):
+                values[f"{label}: head {head} alone"] = one_head(value, head)
+        payload["value_refit"] = {"updates": args.value_refit, "inputs": args.value_inputs, "rows": args.rows or agent.buffer.size,
+                                  "heads": heads, "pessimism": args.value_pessimism, "fits": fits}
     if args.trials:
         payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits, args.bigger, values)}
     name = args.out or f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")

@@ -18,6 +18,7 @@ from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.mpc import TransitionBuffer
 from taskforge.agents.planners import plan
 from taskforge.agents.value import TerminalValue
+from taskforge.agents.weights import WeightsMismatch
 from taskforge.cli import main
 from taskforge.demos import concatenate, generate, record, save
 from taskforge.envs import TaskEnv, load_task
@@ -126,6 +127,33 @@ def test_the_terminal_value_learns_the_discounted_sum_of_rewards():
     with torch.no_grad():
         np.testing.assert_allclose(value(probe).numpy(), 10 * probe[:, 0].numpy(), atol=0.3)
     assert 4.0 < metrics["value_mean"] < 6.0  # 10 x the mean state, 0.5
+
+
+def test_value_heads_agree_on_the_data_and_pessimism_marks_down_where_they_do_not():
+    """`value_ensemble` heads, each on its own bootstrap draw against its own target head, learn
+    the same discounted sum (10 s) where the data is (s in [0, 1]) and part ways off it (s = 3);
+    the planner's score is their mean minus `value_pessimism` x their std, so a state only the
+    extrapolation rates high is marked down."""
+    gen = torch.Generator().manual_seed(0)
+    value = TerminalValue(1, [32, 32], discount=0.9, tau=0.05, generator=gen, heads=5, pessimism=1.0)
+    s = torch.rand((2000, 1), generator=gen)
+    optimizer = torch.optim.Adam(value.net.parameters(), lr=3e-3)
+    metrics = value.fit(s, s[:, 0], s, s.mean(0), s.std(0), optimizer, updates=3000, batch=256, generator=gen)
+    probe = torch.tensor([[0.1], [0.5], [0.9], [3.0]])
+    with torch.no_grad():
+        heads, score = value.each(probe), value(probe)
+    np.testing.assert_allclose(heads[:, :3].numpy(), 10 * probe[:3, 0].expand(5, -1).numpy(), atol=0.4)
+    spread = heads.std(dim=0)
+    assert spread[3] > 10 * spread[:3].max(), spread  # off the data they disagree
+    torch.testing.assert_close(score, heads.mean(dim=0) - spread)
+    assert 0.0 < metrics["value_head_std"] < 0.3
+
+
+def test_value_heads_need_a_value_and_pessimism_needs_two_heads():
+    with pytest.raises(ValueError, match="'value_ensemble' and 'value_pessimism' .* need 'terminal_value: true'"):
+        MPCSpec(value_ensemble=5)
+    with pytest.raises(ValueError, match="'value_pessimism' .* needs 'value_ensemble' >= 2"):
+        MPCSpec(terminal_value=True, discount=0.99, value_pessimism=1.0)
 
 
 def test_a_terminal_value_needs_a_discount():
@@ -343,6 +371,26 @@ def test_a_fresh_refit_of_the_value_forgets_what_it_learnt_before(tmp_path):
     assert resumed.update()["value_refit"] == 1.0
     assert _ranks_by_closeness(resumed, obs, distance) > 0.8
     assert "value_refit" not in resumed.update()
+
+
+def test_an_agent_with_value_heads_ranks_states_and_resumes_them_only_into_as_many_heads(tmp_path):
+    """Through the agent: `value_ensemble` heads, trained on the stage's rows, rank the reach
+    walks' states by closeness to the goal as one V does; a checkpoint restores them, and starting
+    an agent with another number of heads from it (`init_from`) is refused, not reshaped."""
+    obs, actions, distance, starts = _point_mass_walks()
+    agent = _value_agent(value_ensemble=3, value_pessimism=1.0)
+    agent.add_demonstrations(obs, actions, -distance, starts, "reach")
+    metrics = agent.update()
+    assert metrics["value_head_std"] > 0.0
+    assert _ranks_by_closeness(agent, obs, distance) > 0.8
+    torch.save(agent.state_dict(), tmp_path / "agent.pt")
+    resumed = _value_agent(value_ensemble=3, value_pessimism=1.0)
+    resumed.load_state_dict(torch.load(tmp_path / "agent.pt", weights_only=True))
+    x = torch.as_tensor(obs[:100])
+    with torch.no_grad():
+        torch.testing.assert_close(resumed.value(x), agent.value(x))
+    with pytest.raises(WeightsMismatch, match="terminal value 'net.0.weight' has shape"):  # `init_from`
+        _value_agent().load_weights(torch.load(tmp_path / "agent.pt", weights_only=True))
 
 
 def test_a_value_refit_needs_a_value():
@@ -714,6 +762,19 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     narrowed = f"value refit, inputs {' '.join(map(str, mpc_probe.RELATIVE_INPUTS))}"
     assert [row["planner"] for row in result["planners"]] == ["as trained", "no terminal value", "value refit, all inputs", narrowed]
     assert result["value_refit"]["updates"] == 300 and set(result["value_refit"]["fits"]) == {"value refit, all inputs", narrowed}
+
+    # `--value-heads` adds one fit of that many heads, planned at each pessimism; `--rows` fits
+    # every value on the buffer's first rows; `--value-inputs` with no entries skips the narrowed fit
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "1", "--no-bigger", "--value-refit", "50",
+                                     "--value-inputs", "--value-heads", "2", "--value-pessimism", "0", "1", "--rows", "100", "--out", "heads"])
+    mpc_probe.main()
+    result = json.loads((tmp_path / "results/heads.json").read_text())
+    assert [row["planner"] for row in result["planners"]][2:] == [
+        "value refit, all inputs", "value refit, 2 heads, mean - 0 std", "value refit, 2 heads, mean - 1 std"]
+    assert result["value_refit"]["rows"] == 100 and result["value_refit"]["fits"]["value refit, 2 heads"]["value_head_std"] > 0
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--value-refit", "10", "--rows", "0"])
+    with pytest.raises(SystemExit, match="--rows 0 must be in 1"):
+        mpc_probe.main()
 
     agent = load_run(checkpoint).agent
     agent.load_state_dict(load_checkpoint(checkpoint.parent / "checkpoint.pt")["agent"])

@@ -330,7 +330,8 @@ class MPCAgent:
         """V and its optimizer from new weights (drawn from `generator`): at the start, and at
         each fresh refit."""
         self.value = TerminalValue(self.observation_space.shape[0], self.mpc.hidden_sizes, self.mpc.discount,
-                                   self.mpc.value_tau, self.generator).to(self.device)
+                                   self.mpc.value_tau, self.generator, self.mpc.value_ensemble,
+                                   self.mpc.value_pessimism).to(self.device)
         self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
 
     def update(self) -> dict[str, float]:

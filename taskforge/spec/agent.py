@@ -172,6 +172,18 @@ class MPCSpec(StrictModel):
     on pick-place at 400k the same model and planner placed 0.28 of 50 held-out goals with the
     online V and 0.50 with one refitted on the final buffer (benchmarks/RESULTS.md). 0: never, V
     is fitted online only. Needs `terminal_value`."""
+    value_ensemble: int = Field(default=1, ge=1)
+    """Heads of V, each fitted by TD(0) on its own bootstrap draw of the data against its own
+    target head (bootstrapped DQN, Osband et al. 2016), so they disagree where the data says
+    little; plans score a last state by their mean (minus `value_pessimism` x their std). Why:
+    one V refitted on push seed 1's 100k data planned 0.20 of 30 held-out goals, single heads
+    0.30 and 0.47, the mean of 5 heads 0.60 (benchmarks/RESULTS.md). 1: one V. Needs
+    `terminal_value`."""
+    value_pessimism: float = Field(default=0.0, ge=0.0)
+    """Weight of the value heads' std subtracted from their mean in a plan's score (a lower
+    confidence bound, as LOOP and MOPO plan on, against a planner seeking the states V
+    overrates). Measured on that push data it did not add to the mean (0.53 at 1 and 2 std, 0.60
+    at 0). 0: the heads' mean. Needs `value_ensemble` >= 2."""
     value_refit_updates: int = Field(default=40_000, ge=1)
     """TD(0) steps of each fresh refit (40k: what the measured offline refit took, ~2 min on 2
     CPU cores at 3 x 256)."""
@@ -199,6 +211,11 @@ class MPCSpec(StrictModel):
             raise ValueError("'terminal_value' needs 'discount' < 1 (e.g. 0.99): a value sums the rewards it discounts")
         if self.value_refit_every and not self.terminal_value:
             raise ValueError(f"'value_refit_every' ({self.value_refit_every}) refits the terminal value: it needs 'terminal_value: true'")
+        if (self.value_ensemble > 1 or self.value_pessimism) and not self.terminal_value:
+            raise ValueError("'value_ensemble' and 'value_pessimism' shape the terminal value: they need 'terminal_value: true'")
+        if self.value_pessimism and self.value_ensemble < 2:
+            raise ValueError(f"'value_pessimism' ({self.value_pessimism:g}) needs 'value_ensemble' >= 2: "
+                             "it weighs the spread of the value heads")
         if self.elites > self.population:
             raise ValueError(f"'elites' ({self.elites}) must be <= 'population' ({self.population})")
         if self.optimism and self.particles < 2:
