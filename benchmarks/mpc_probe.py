@@ -26,9 +26,9 @@
    `--value-heads K` adds a fit of K heads (`mpc.value_ensemble`), planning on their mean minus
    each `--value-pessimism` x their std (`mpc.value_pessimism`): does a pessimistic V keep the
    planner from exploiting states V overrates? `--heads-alone N` plans with each of the first N
-   heads alone too (is the heads' mean better than one V because it averages them?). `--rows N` fits every value on the buffer's first
-   N transitions (the data a refit at env step N saw; `--value-inputs` with no entries skips the
-   second fit).
+   heads alone too (is the heads' mean better than one V because it averages them?). `--rows N`
+   fits every value on the buffer's first N transitions (the data a refit at env step N saw;
+   `--value-inputs` with no entries skips the second fit).
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
@@ -126,16 +126,16 @@ def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversam
 
 
 def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None, rows: int | None = None,
-                heads: int = 1, pessimism: float = 0.0) -> tuple[TerminalValue, dict[str, float]]:
+                heads: int = 1) -> tuple[TerminalValue, dict[str, float]]:
     """A fresh terminal value of the run's size fitted as `MPCAgent._fit` fits it (TD(0) on the
     buffer, target network, the model's input statistics) for `updates` steps on the buffer's
     first `rows` transitions (default: all of them) at once, and its fit's metrics. With
     `inputs`, it reads only those observation entries: the others are standardised by an
-    infinite spread, so every value they take reaches the network as 0. `heads` and
-    `pessimism`: `mpc.value_ensemble` and `mpc.value_pessimism`."""
+    infinite spread, so every value they take reaches the network as 0. `heads`:
+    `mpc.value_ensemble` (scored by their mean; set `pessimism` on the result for a lower bound)."""
     n, obs_size = rows or agent.buffer.size, agent.buffer.obs.shape[1]
     generator = torch.Generator().manual_seed(seed)
-    value = TerminalValue(obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator, heads, pessimism)
+    value = TerminalValue(obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator, heads)
     std = agent.model.in_std[:obs_size].clone()
     if inputs is not None:
         ignored = torch.ones(obs_size, dtype=torch.bool)

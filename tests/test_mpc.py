@@ -149,6 +149,17 @@ def test_value_heads_agree_on_the_data_and_pessimism_marks_down_where_they_do_no
     assert 0.0 < metrics["value_head_std"] < 0.3
 
 
+def test_the_probe_takes_one_head_of_several_as_a_value_of_its_own():
+    """`mpc_probe.one_head`: head k alone, its target head with it, scores what head k scored."""
+    value = TerminalValue(3, [8, 8], discount=0.9, tau=0.05, generator=torch.Generator().manual_seed(0), heads=4, pessimism=1.0)
+    x = torch.randn((7, 3), generator=torch.Generator().manual_seed(1))
+    with torch.no_grad():
+        for head in range(4):
+            alone = mpc_probe.one_head(value, head)
+            torch.testing.assert_close(alone(x), value.each(x)[head])
+            torch.testing.assert_close(alone.each(x, target=True)[0], value.each(x, target=True)[head])
+
+
 def test_value_heads_need_a_value_and_pessimism_needs_two_heads():
     with pytest.raises(ValueError, match="'value_ensemble' and 'value_pessimism' .* need 'terminal_value: true'"):
         MPCSpec(value_ensemble=5)
@@ -766,11 +777,13 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     # `--value-heads` adds one fit of that many heads, planned at each pessimism; `--rows` fits
     # every value on the buffer's first rows; `--value-inputs` with no entries skips the narrowed fit
     monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "1", "--no-bigger", "--value-refit", "50",
-                                     "--value-inputs", "--value-heads", "2", "--value-pessimism", "0", "1", "--rows", "100", "--out", "heads"])
+                                     "--value-inputs", "--value-heads", "2", "--value-pessimism", "0", "1", "--heads-alone", "1",
+                                     "--rows", "100", "--out", "heads"])
     mpc_probe.main()
     result = json.loads((tmp_path / "results/heads.json").read_text())
     assert [row["planner"] for row in result["planners"]][2:] == [
-        "value refit, all inputs", "value refit, 2 heads, mean - 0 std", "value refit, 2 heads, mean - 1 std"]
+        "value refit, all inputs", "value refit, 2 heads, mean - 0 std", "value refit, 2 heads, mean - 1 std",
+        "value refit, 2 heads: head 0 alone"]
     assert result["value_refit"]["rows"] == 100 and result["value_refit"]["fits"]["value refit, 2 heads"]["value_head_std"] > 0
     monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--value-refit", "10", "--rows", "0"])
     with pytest.raises(SystemExit, match="--rows 0 must be in 1"):
