@@ -229,8 +229,9 @@ def main() -> None:
                 values[label] = value
                 continue
             for kappa in args.value_pessimism:  # the same heads, scored by mean - kappa x std
-                values[f"{label}, mean - {kappa:g} std"] = copy.copy(value)
-                values[f"{label}, mean - {kappa:g} std"].pessimism = kappa
+                scored = copy.copy(value)
+                scored.pessimism = kappa
+                values[f"{label}, mean - {kappa:g} std"] = scored
             for head in range(min(args.heads_alone, count)):
                 values[f"{label}: head {head} alone"] = one_head(value, head)
         payload["value_refit"] = {"updates": args.value_refit, "inputs": args.value_inputs, "rows": args.rows or agent.buffer.size,

@@ -53,7 +53,7 @@ class TerminalValue(nn.Module):
         self.register_buffer("obs_std", torch.ones(obs_size))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        """The planner's score of observations `[..., obs]` -> `[...]`: the heads' lower bound."""
+        """The planner's score of observations `[..., obs]` -> `[...]`: the heads' mean minus `pessimism` x their std (one head: its V)."""
         values = self.each(obs)
         if self.heads == 1:
             return values[0]
@@ -62,8 +62,8 @@ class TerminalValue(nn.Module):
     def each(self, obs: torch.Tensor, target: bool = False) -> torch.Tensor:
         """Every head's V of the same observations `[..., obs]` -> `[heads, ...]` (from the
         target heads if `target`)."""
-        x = ((obs - self.obs_mean) / self.obs_std).reshape(1, -1, obs.shape[-1]).expand(self.heads, -1, -1)
-        return run_mlp(self.target if target else self.net, x).reshape(self.heads, *obs.shape[:-1]) * self.scale
+        rows = obs.reshape(1, -1, obs.shape[-1]).expand(self.heads, -1, -1)
+        return self._own(rows, target).reshape(self.heads, *obs.shape[:-1])
 
     def _own(self, obs: torch.Tensor, target: bool = False) -> torch.Tensor:
         """Head h's V of its own rows `obs[h]` (`[heads, batch, obs]` -> `[heads, batch]`)."""
