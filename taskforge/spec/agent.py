@@ -185,8 +185,8 @@ class MPCSpec(StrictModel):
     overrates). Measured on that push data it did not add to the mean (0.53 at 1 and 2 std, 0.60
     at 0). 0: the heads' mean. Needs `value_ensemble` >= 2."""
     value_refit_updates: int = Field(default=40_000, ge=1)
-    """TD(0) steps of each fresh refit (40k: what the measured offline refit took, ~2 min on 2
-    CPU cores at 3 x 256)."""
+    """TD(0) steps of each fresh refit (40k: what the measured offline refit took; 2-13 min on 2
+    CPU cores at 3 x 256 as the machine's speed varies between sessions, one V or 5 heads alike)."""
     prior_trajectories: int = Field(default=0, ge=0)
     """Candidates per planning round proposed by a policy cloned from the warm start's demos,
     each its rollout through the model for `horizon` steps (MoDem, Hansen et al. 2022; TD-MPC's
