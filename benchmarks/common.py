@@ -50,13 +50,17 @@ def advance_run(curriculum: Path, run_dir: Path, seed: int, total: int, chunk: i
     its checkpoint; returns its step count. Long comparisons span sessions this way. A finished
     run committed without its checkpoint (metrics only) is left as it is."""
     from taskforge.run import RunDir
-    from taskforge.training import train
+    from taskforge.training import Interrupted, train
 
     run = RunDir(run_dir)
     done = run.steps_done()
     if done < total:
         # the run's length is `total` (the learning-rate schedule spans it); the chunk only pauses it
-        train(curriculum, run_dir=run_dir, seed=seed, steps=total, stop_at=done + chunk, resume=True, progress=False)
+        try:
+            train(curriculum, run_dir=run_dir, seed=seed, steps=total, stop_at=done + chunk, resume=True, progress=False)
+        except Interrupted as exc:  # Ctrl-C/SIGTERM: the checkpoint is saved; say so in one line, as `taskforge train` does
+            print(str(exc), file=sys.stderr)
+            raise SystemExit(130) from None
         done = run.steps_done()
     return done
 

@@ -28,13 +28,20 @@
    planner from exploiting states V overrates? `--heads-alone N` plans with each of the first N
    heads alone too (is the heads' mean better than one V because it averages them?). `--rows N`
    fits every value on the buffer's first N transitions (the data a refit at env step N saw;
-   `--value-inputs` with no entries skips the second fit).
+   `--value-inputs` with no entries skips the second fit). `--value-from CHECKPOINT ...` plans
+   with the terminal value saved in each of those checkpoints (another step of the same run) in
+   place of the run's own, the model and search unchanged: is it the value or the model that
+   changed between two checkpoints' plans (e.g. a refit's value against the one before it)?
+   `--value-from-updates N` also goes on fitting each of them for N TD(0) steps on the first
+   `--rows` transitions (a fresh Adam): what a refit fits, from those weights instead of new
+   ones (is it the new weights or the fit to the newer data that changes the plans?).
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
                                    [--nll-beta 0.5] [--no-bigger] [--value-refit 40000]
                                    [--value-inputs 2 3 6 39 40 41 42 43 44] [--value-heads 5]
-                                   [--value-pessimism 0 1 2] [--heads-alone 2] [--rows 100000] [--out NAME]
+                                   [--value-pessimism 0 1 2] [--heads-alone 2] [--rows 100000]
+                                   [--value-from <an earlier checkpoint.pt>] [--value-from-updates 40000] [--out NAME]
 
 `--object`, `--hand`: where the object's and the hand's positions sit in the observation
 (Meta-World: 4:7, 0:3).
@@ -126,16 +133,18 @@ def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversam
 
 
 def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None, rows: int | None = None,
-                heads: int = 1) -> tuple[TerminalValue, dict[str, float]]:
+                heads: int = 1, start: TerminalValue | None = None) -> tuple[TerminalValue, dict[str, float]]:
     """A fresh terminal value of the run's size fitted as `MPCAgent._fit` fits it (TD(0) on the
     buffer, target network, the model's input statistics) for `updates` steps on the buffer's
     first `rows` transitions (default: all of them) at once, and its fit's metrics. With
     `inputs`, it reads only those observation entries: the others are standardised by an
     infinite spread, so every value they take reaches the network as 0. `heads`:
-    `mpc.value_ensemble` (scored by their mean; set `pessimism` on the result for a lower bound)."""
+    `mpc.value_ensemble` (scored by their mean; set `pessimism` on the result for a lower bound).
+    `start`: fit a copy of that value on from its weights instead (`heads` is then its own)."""
     n, obs_size = rows or agent.buffer.size, agent.buffer.obs.shape[1]
     generator = torch.Generator().manual_seed(seed)
-    value = TerminalValue(obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator, heads)
+    value = copy.deepcopy(start) if start is not None else TerminalValue(
+        obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator, heads)
     std = agent.model.in_std[:obs_size].clone()
     if inputs is not None:
         ignored = torch.ones(obs_size, dtype=torch.bool)
@@ -145,6 +154,24 @@ def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None,
     metrics = value.fit(agent.buffer.obs[:n], agent.buffer.rewards[:n], agent.buffer.next_obs[:n], agent.model.in_mean[:obs_size],
                         std, optimizer, updates, agent.mpc.batch_size, generator)
     return value, metrics
+
+
+def saved_value(agent, path: Path) -> tuple[str, TerminalValue, dict]:
+    """The terminal value saved in the checkpoint at `path` (the same run at another step), to
+    plan with in place of the run's own: its label, the value (with its own input statistics)
+    and where it came from."""
+    if not path.is_file():
+        sys.exit(f"error: {path}: --value-from expects a checkpoint.pt file (not found)")
+    state = load_checkpoint(path)["agent"]
+    if "value" not in state:
+        sys.exit(f"error: {path}: --value-from: this checkpoint has no terminal value (mpc.terminal_value: false)")
+    value = copy.deepcopy(agent.value)
+    try:
+        value.load_state_dict(state["value"])
+    except RuntimeError:
+        sys.exit(f"error: {path}: --value-from: its terminal value has another shape than this run's (mpc.value_ensemble or hidden_sizes differ)")
+    step = state["global_step"]
+    return f"value saved at step {step:,}", value, {"checkpoint": str(path), "step": step, "value_refits": state.get("value_refits", 0)}
 
 
 def one_head(value: TerminalValue, head: int) -> TerminalValue:
@@ -182,12 +209,16 @@ def main() -> None:
     parser.add_argument("--value-pessimism", type=float, nargs="+", default=[0.0], help="plan with the heads' mean minus each of these x their std")
     parser.add_argument("--heads-alone", type=int, default=0, help="also plan with each of the first N of those heads alone")
     parser.add_argument("--rows", type=int, help="fit the values on the buffer's first ROWS transitions (default: all)")
+    parser.add_argument("--value-from", type=Path, nargs="+", default=[], help="also plan with the terminal value saved in each of these checkpoints")
+    parser.add_argument("--own", action=argparse.BooleanOptionalAction, default=True,
+                        help="plan with the run's own value and with none (--no-own: only what else is asked, where those are measured already)")
+    parser.add_argument("--value-from-updates", type=int, default=0, help="also with each of those values fitted on for this many TD(0) steps")
     parser.add_argument("--out", help="the result's name under benchmarks/results/ (default: mpc_probe_<run>[_<hidden>])")
     args = parser.parse_args()
     run = load_run(args.run)
     agent = run.agent
-    if args.value_refit and agent.value is None:
-        sys.exit(f"error: {args.run}: --value-refit needs a run with mpc.terminal_value: true (this one plans without a value)")
+    if (args.value_refit or args.value_from) and agent.value is None:
+        sys.exit(f"error: {args.run}: --value-refit and --value-from need a run with mpc.terminal_value: true (this one plans without a value)")
     obj, hand = (slice(*(int(x) for x in s.split(":"))) for s in (args.object, args.hand))
     agent.load_state_dict(load_checkpoint(args.run / "checkpoint.pt")["agent"])  # the buffer: the final policy file has none
     if args.rows is not None and not 0 < args.rows <= agent.buffer.size:
@@ -236,23 +267,32 @@ def main() -> None:
                 values[f"{label}: head {head} alone"] = one_head(value, head)
         payload["value_refit"] = {"updates": args.value_refit, "inputs": args.value_inputs, "rows": args.rows or agent.buffer.size,
                                   "heads": heads, "pessimism": args.value_pessimism, "fits": fits}
+    for path in args.value_from:
+        label, values[label], source = saved_value(agent, path)
+        if args.value_from_updates:
+            start = time.perf_counter()
+            fitted, source["fit"] = refit_value(agent, args.value_from_updates, seed=0, rows=args.rows, start=values[label])
+            values[f"{label}, + {args.value_from_updates} TD steps"] = fitted
+            print(f"{label}: {args.value_from_updates} more steps in {time.perf_counter() - start:.0f} s, {source['fit']}")
+        payload.setdefault("value_from", []).append(source)
     if args.trials:
-        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits, args.bigger, values)}
+        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits, args.bigger, values, args.own)}
     name = args.out or f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")
     print(f"wrote {write_result(name, payload)}")
 
 
 def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble], bigger: bool = True,
-                     values: dict[str, TerminalValue] | None = None) -> list[dict]:
+                     values: dict[str, TerminalValue] | None = None, own: bool = True) -> list[dict]:
     """Held-out success of the final model with its own planner (and with `BIGGER`, and without
-    its terminal value where it has one), of each of `refits` with the run's own planner, and
-    of the run's model and search with each of `values` in place of its own."""
+    its terminal value where it has one; `own=False` skips these, measured already), of each of
+    `refits` with the run's own planner, and of the run's model and search with each of `values`
+    in place of its own."""
     task, task_file, stages = run.phases[-1]
     own_model, own_planner, own_value = agent.model, agent.spec.planning, agent.value
-    plans = [("run's model", own_model, "as trained", {}, own_value)]
+    plans = [("run's model", own_model, "as trained", {}, own_value)] if own else []
     plans += [("run's model", own_model, "bigger search", BIGGER, own_value)] if bigger else []
     # is it the terminal value that steers the plans? the same model and search, scored by reward alone
-    plans += [("run's model", own_model, "no terminal value", {}, None)] if own_value is not None else []
+    plans += [("run's model", own_model, "no terminal value", {}, None)] if own and own_value is not None else []
     plans += [(label, model, "as trained", {}, own_value) for label, model in refits.items()]
     plans += [("run's model", own_model, label, {}, value) for label, value in (values or {}).items()]
     rows = []

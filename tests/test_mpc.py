@@ -756,12 +756,13 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     the demo's states, which earned the pick reward, above the untrained planner's); the one
     narrowed to `--value-inputs` gives the same value whatever the hand's x and y, the full
     one does not; each plans the held-out goal, after the run's own value and none. A run
-    without a value is a one-line error, before any work."""
+    without a value is a one-line error, before any work. `--value-from` reads the value a
+    checkpoint saved, not the one the agent holds."""
     (tmp_path / "plain").mkdir()
     plain, _ = demos_run(tmp_path / "plain", "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400)
     monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
     monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(plain.parent), "--value-refit", "10"])
-    with pytest.raises(SystemExit, match="needs a run with mpc.terminal_value: true"):
+    with pytest.raises(SystemExit, match="need a run with mpc.terminal_value: true"):
         mpc_probe.main()
 
     checkpoint, transitions = demos_run(tmp_path, "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400,
@@ -789,9 +790,38 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     with pytest.raises(SystemExit, match="--rows 0 must be in 1"):
         mpc_probe.main()
 
+    # `--value-from` plans with the value another checkpoint saved, and with it fitted on for
+    # `--value-from-updates`; `--no-own` skips the run's own value and none; a checkpoint without
+    # a value, or no checkpoint, is a one-line error
+    saved_at = checkpoint.parent / "checkpoint.pt"
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "1", "--no-bigger", "--no-own",
+                                     "--value-from", str(saved_at), "--value-from-updates", "20", "--out", "saved"])
+    mpc_probe.main()
+    result = json.loads((tmp_path / "results/saved.json").read_text())
+    (source,) = result["value_from"]
+    assert (source["checkpoint"], source["step"], source["value_refits"]) == (str(saved_at), result["step"], 0), source
+    assert source["fit"]["value_loss"] >= 0, source
+    label = f"value saved at step {result['step']:,}"
+    assert [row["planner"] for row in result["planners"]] == [label, f"{label}, + 20 TD steps"]
+    for path, error in ((plain.parent / "checkpoint.pt", "this checkpoint has no terminal value"), (tmp_path / "none.pt", "expects a checkpoint.pt file")):
+        monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "0", "--value-from", str(path)])
+        with pytest.raises(SystemExit, match=error):
+            mpc_probe.main()
+
     agent = load_run(checkpoint).agent
-    agent.load_state_dict(load_checkpoint(checkpoint.parent / "checkpoint.pt")["agent"])
+    agent.load_state_dict(load_checkpoint(saved_at)["agent"])
     obs = agent.buffer.obs[: agent.buffer.size]
+    own, agent.value = agent.value, mpc_probe.refit_value(agent, 10, seed=1)[0]  # the agent now holds another value
+    saved_label, saved, _ = mpc_probe.saved_value(agent, saved_at)
+    continued, _ = mpc_probe.refit_value(agent, 1, seed=0, start=saved)
+    with torch.no_grad():  # the checkpoint's value, its input statistics with it, not the one the agent holds
+        torch.testing.assert_close(saved(obs), own(obs))
+        assert not torch.allclose(agent.value(obs), own(obs))
+        # fitting on from it starts at its weights and leaves it as it was
+        assert (continued(obs) - own(obs)).abs().mean() < 0.5 * (agent.value(obs) - own(obs)).abs().mean()  # measured 0.13
+        torch.testing.assert_close(saved(obs), own(obs))
+    assert saved_label == label
+    agent.value = own
     moved = obs.clone()
     moved[:, :2] += 0.05  # the hand 5 cm along x and y, all else as it was
     for inputs in (None, mpc_probe.RELATIVE_INPUTS):
