@@ -170,15 +170,17 @@ class MPCSpec(StrictModel):
     Why: a V fitted online follows its targets while they grow tens of times over and keeps what
     the early data taught it (the primacy bias that Nikishin et al. 2022 reset networks against);
     on pick-place at 400k the same model and planner placed 0.28 of 50 held-out goals with the
-    online V and 0.50 with one refitted on the final buffer (benchmarks/RESULTS.md). 0: never, V
-    is fitted online only. Needs `terminal_value`."""
+    online V and 0.50 with one refitted on the final buffer (benchmarks/RESULTS.md). It can hurt
+    once most episodes succeed: push seed 1's refit at 100k fell to 0.16 (one V) and 0.12 (5
+    heads); with the model fixed, the value from before it planned 0.77 of 30 goals, the
+    refitted one 0.33. 0: never, V is fitted online only. Needs `terminal_value`."""
     value_ensemble: int = Field(default=1, ge=1)
     """Heads of V, each fitted by TD(0) on its own bootstrap draw of the data against its own
     target head (bootstrapped DQN, Osband et al. 2016), so they disagree where the data says
     little; plans score a last state by their mean (minus `value_pessimism` x their std). Why:
     one V refitted on push seed 1's 100k data planned 0.20 of 30 held-out goals, single heads
-    0.30 and 0.47, the mean of 5 heads 0.60 (benchmarks/RESULTS.md). 1: one V. Needs
-    `terminal_value`."""
+    0.30 and 0.47, the mean of 5 heads 0.60 (with the run's 130k model; live, they fell at that
+    refit as one V did: benchmarks/RESULTS.md). 1: one V. Needs `terminal_value`."""
     value_pessimism: float = Field(default=0.0, ge=0.0)
     """Weight of the value heads' std subtracted from their mean in a plan's score (a lower
     confidence bound, as LOOP and MOPO plan on, against a planner seeking the states V
