@@ -35,12 +35,16 @@
    `--value-from-updates N` also goes on fitting each of them for N TD(0) steps on the first
    `--rows` transitions (a fresh Adam): what a refit fits, from those weights instead of new
    ones (is it the new weights or the fit to the newer data that changes the plans?).
+   `--value-discount G ...` adds a refit (all inputs) at each discount G, the planner then
+   discounting by G too (does a shorter-sighted V rank the states better?);
+   `--no-value-all-inputs` skips the all-inputs refit where it is measured already.
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
                                    [--nll-beta 0.5] [--no-bigger] [--value-refit 40000]
                                    [--value-inputs 2 3 6 39 40 41 42 43 44] [--value-heads 5]
                                    [--value-pessimism 0 1 2] [--heads-alone 2] [--rows 100000]
+                                   [--value-discount 0.95 0.9] [--no-value-all-inputs]
                                    [--value-from <an earlier checkpoint.pt>] [--value-from-updates 40000] [--out NAME]
 
 `--object`, `--hand`: where the object's and the hand's positions sit in the observation
@@ -133,18 +137,20 @@ def refit(agent, train: torch.Tensor, moved: torch.Tensor, updates: int, oversam
 
 
 def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None, rows: int | None = None,
-                heads: int = 1, start: TerminalValue | None = None) -> tuple[TerminalValue, dict[str, float]]:
+                heads: int = 1, start: TerminalValue | None = None,
+                discount: float | None = None) -> tuple[TerminalValue, dict[str, float]]:
     """A fresh terminal value of the run's size fitted as `MPCAgent._fit` fits it (TD(0) on the
     buffer, target network, the model's input statistics) for `updates` steps on the buffer's
     first `rows` transitions (default: all of them) at once, and its fit's metrics. With
     `inputs`, it reads only those observation entries: the others are standardised by an
     infinite spread, so every value they take reaches the network as 0. `heads`:
     `mpc.value_ensemble` (scored by their mean; set `pessimism` on the result for a lower bound).
-    `start`: fit a copy of that value on from its weights instead (`heads` is then its own)."""
+    `start`: fit a copy of that value on from its weights instead (`heads` is then its own).
+    `discount`: V's own discount instead of the run's (the planner then plans with it too)."""
     n, obs_size = rows or agent.buffer.size, agent.buffer.obs.shape[1]
     generator = torch.Generator().manual_seed(seed)
     value = copy.deepcopy(start) if start is not None else TerminalValue(
-        obs_size, agent.mpc.hidden_sizes, agent.mpc.discount, agent.mpc.value_tau, generator, heads)
+        obs_size, agent.mpc.hidden_sizes, discount or agent.mpc.discount, agent.mpc.value_tau, generator, heads)
     std = agent.model.in_std[:obs_size].clone()
     if inputs is not None:
         ignored = torch.ones(obs_size, dtype=torch.bool)
@@ -205,6 +211,10 @@ def main() -> None:
     parser.add_argument("--bigger", action=argparse.BooleanOptionalAction, default=True, help="also plan with a ~10x bigger search")
     parser.add_argument("--value-refit", type=int, default=0, help="TD(0) steps of two offline refits of the terminal value (0: skip them)")
     parser.add_argument("--value-inputs", type=int, nargs="*", default=RELATIVE_INPUTS, help="the observation entries the second value refit reads (none: skip it)")
+    parser.add_argument("--value-all-inputs", action=argparse.BooleanOptionalAction, default=True,
+                        help="fit the value refit that reads every input (--no-value-all-inputs: only the --value-inputs one, the other measured already)")
+    parser.add_argument("--value-discount", type=float, nargs="+", default=[],
+                        help="also a value refit (all inputs) with each of these discounts, planned with it (the run's: mpc.discount)")
     parser.add_argument("--value-heads", type=int, default=1, help="also a value refit of this many heads (1: none)")
     parser.add_argument("--value-pessimism", type=float, nargs="+", default=[0.0], help="plan with the heads' mean minus each of these x their std")
     parser.add_argument("--heads-alone", type=int, default=0, help="also plan with each of the first N of those heads alone")
@@ -249,12 +259,14 @@ def main() -> None:
     values: dict[str, TerminalValue] = {}
     if args.value_refit:
         fits, heads = {}, args.value_heads
-        runs = [("value refit, all inputs", None, 1)]
+        runs = [("value refit, all inputs", None, 1)] if args.value_all_inputs else []
         runs += [(f"value refit, inputs {' '.join(map(str, args.value_inputs))}", args.value_inputs, 1)] if args.value_inputs else []
         runs += [(f"value refit, {heads} heads", None, heads)] if heads > 1 else []
-        for label, inputs, count in runs:
+        runs = [(label, inputs, count, None) for label, inputs, count in runs]
+        runs += [(f"value refit, all inputs, discount {gamma:g}", None, 1, gamma) for gamma in args.value_discount]
+        for label, inputs, count, gamma in runs:
             start = time.perf_counter()
-            value, fits[label] = refit_value(agent, args.value_refit, seed=0, inputs=inputs, rows=args.rows, heads=count)
+            value, fits[label] = refit_value(agent, args.value_refit, seed=0, inputs=inputs, rows=args.rows, heads=count, discount=gamma)
             print(f"{label}: {args.value_refit} steps in {time.perf_counter() - start:.0f} s, {fits[label]}")
             if count == 1:
                 values[label] = value
@@ -266,7 +278,7 @@ def main() -> None:
             for head in range(min(args.heads_alone, count)):
                 values[f"{label}: head {head} alone"] = one_head(value, head)
         payload["value_refit"] = {"updates": args.value_refit, "inputs": args.value_inputs, "rows": args.rows or agent.buffer.size,
-                                  "heads": heads, "pessimism": args.value_pessimism, "fits": fits}
+                                  "heads": heads, "pessimism": args.value_pessimism, "discounts": args.value_discount, "fits": fits}
     for path in args.value_from:
         label, values[label], source = saved_value(agent, path)
         if args.value_from_updates:
@@ -294,13 +306,15 @@ def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble
     # is it the terminal value that steers the plans? the same model and search, scored by reward alone
     plans += [("run's model", own_model, "no terminal value", {}, None)] if own and own_value is not None else []
     plans += [(label, model, "as trained", {}, own_value) for label, model in refits.items()]
-    plans += [("run's model", own_model, label, {}, value) for label, value in (values or {}).items()]
+    # a value of another discount than the run's plans with its own (the horizon's rewards and V's weight)
+    plans += [("run's model", own_model, label, {} if value.discount == own_planner.discount else {"discount": value.discount}, value)
+              for label, value in (values or {}).items()]
     rows = []
     for model_label, model, planner, change, value in plans:
         agent.model, agent.mpc, agent.value = model, own_planner.model_copy(update=change), value
         start = time.perf_counter()
         (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
-        rows.append({"model": model_label, "planner": planner, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites"}),
+        rows.append({"model": model_label, "planner": planner, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites", "discount"}),
                      "success_rate": result.as_dict()["success_rate"], "seconds": time.perf_counter() - start})
     agent.model, agent.mpc, agent.value = own_model, own_planner, own_value
     print_table(["model", "planner", "population x rounds x horizon", "held-out success", "s"],

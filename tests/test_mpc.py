@@ -776,15 +776,18 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     assert result["value_refit"]["updates"] == 300 and set(result["value_refit"]["fits"]) == {"value refit, all inputs", narrowed}
 
     # `--value-heads` adds one fit of that many heads, planned at each pessimism; `--rows` fits
-    # every value on the buffer's first rows; `--value-inputs` with no entries skips the narrowed fit
+    # every value on the buffer's first rows; `--value-inputs` with no entries skips the narrowed
+    # fit, `--no-value-all-inputs` the full one; `--value-discount` adds a fit at that discount,
+    # planned with it (the run's own plans at 0.9)
     monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "1", "--no-bigger", "--value-refit", "50",
-                                     "--value-inputs", "--value-heads", "2", "--value-pessimism", "0", "1", "--heads-alone", "1",
-                                     "--rows", "100", "--out", "heads"])
+                                     "--value-inputs", "--no-value-all-inputs", "--value-heads", "2", "--value-pessimism", "0", "1",
+                                     "--heads-alone", "1", "--value-discount", "0.5", "--rows", "100", "--out", "heads"])
     mpc_probe.main()
     result = json.loads((tmp_path / "results/heads.json").read_text())
     assert [row["planner"] for row in result["planners"]][2:] == [
-        "value refit, all inputs", "value refit, 2 heads, mean - 0 std", "value refit, 2 heads, mean - 1 std",
-        "value refit, 2 heads: head 0 alone"]
+        "value refit, 2 heads, mean - 0 std", "value refit, 2 heads, mean - 1 std",
+        "value refit, 2 heads: head 0 alone", "value refit, all inputs, discount 0.5"]
+    assert [row["discount"] for row in result["planners"]] == [0.9] * 5 + [0.5], result["planners"]
     assert result["value_refit"]["rows"] == 100 and result["value_refit"]["fits"]["value refit, 2 heads"]["value_head_std"] > 0
     monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--value-refit", "10", "--rows", "0"])
     with pytest.raises(SystemExit, match="--rows 0 must be in 1"):
@@ -824,6 +827,9 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     agent.value = own
     moved = obs.clone()
     moved[:, :2] += 0.05  # the hand 5 cm along x and y, all else as it was
+    (near, _), (far, _) = (mpc_probe.refit_value(agent, 300, seed=0, discount=gamma) for gamma in (0.5, None))
+    with torch.no_grad():  # a value of a lower discount sums fewer of the same (positive) rewards
+        assert (near.discount, far.discount) == (0.5, 0.9) and near(obs).mean() < far(obs).mean(), (near(obs).mean(), far(obs).mean())
     for inputs in (None, mpc_probe.RELATIVE_INPUTS):
         value, _ = mpc_probe.refit_value(agent, 300, seed=0, inputs=inputs)
         with torch.no_grad():
