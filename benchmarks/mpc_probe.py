@@ -38,13 +38,18 @@
    `--value-discount G ...` adds a refit (all inputs) at each discount G, the planner then
    discounting by G too (does a shorter-sighted V rank the states better?);
    `--no-value-all-inputs` skips the all-inputs refit where it is measured already.
+5. TD-MPC's value (`--policy-value UPDATES`): is it V, the value of the data's behaviour, that
+   misleads the planner, where the value of a policy that improves on it would not? Q and pi
+   fitted offline by TD3+BC on the first `--rows` transitions, the planner scoring a plan's
+   last state by `Q(s, pi(s))`, once alone and once with 5 of pi's rollouts through the model
+   among each round's candidates (TD-MPC's policy-guided trajectories, `mpc.prior_trajectories`).
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
                                    [--nll-beta 0.5] [--no-bigger] [--value-refit 40000]
                                    [--value-inputs 2 3 6 39 40 41 42 43 44] [--value-heads 5]
                                    [--value-pessimism 0 1 2] [--heads-alone 2] [--rows 100000]
-                                   [--value-discount 0.95 0.9] [--no-value-all-inputs]
+                                   [--value-discount 0.95 0.9] [--no-value-all-inputs] [--policy-value 40000]
                                    [--value-from <an earlier checkpoint.pt>] [--value-from-updates 40000] [--out NAME]
 
 `--object`, `--hand`: where the object's and the hand's positions sit in the observation
@@ -64,12 +69,14 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
-from taskforge.agents.dynamics import DynamicsEnsemble  # noqa: E402
+from taskforge.agents.dynamics import DynamicsEnsemble, ensemble_mlp, run_mlp  # noqa: E402
+from taskforge.agents.prior import PolicyPrior  # noqa: E402
 from taskforge.agents.value import TerminalValue  # noqa: E402
 from taskforge.rollouts import evaluate_rows  # noqa: E402
 from taskforge.run import load_checkpoint, load_run  # noqa: E402
 
 BIGGER = {"population": 200, "iterations": 4, "horizon": 15, "elites": 20}
+PROPOSALS = 5  # pi's rollouts among each planning round's candidates (`mpc.prior_trajectories`; a tenth of the push preset's 50)
 BINS_MM = ((0, 2), (2, 5), (5, 10), (10, 1000))
 # Meta-World's observation: hand z, gripper, object z, then (tasks' `relative_positions`, last)
 # object - tool and goal - object
@@ -162,6 +169,70 @@ def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None,
     return value, metrics
 
 
+class PolicyValue(torch.nn.Module):
+    """TD-MPC's terminal value: the learnt policy's own Q, `Q(s, pi(s))`, as the planner scores a
+    plan's last state (`[..., obs]` -> `[...]`), with `pi` (`policy`, a `PolicyPrior`) to
+    propose rollouts. Twin Q heads as TD3's; the planner reads the first, as TD3's actor does."""
+
+    def __init__(self, obs_size: int, action_size: int, hidden_sizes: list[int], discount: float, generator: torch.Generator):
+        super().__init__()
+        self.discount, self.scale = discount, 1.0 / (1.0 - discount)
+        self.q = ensemble_mlp(2, [obs_size + action_size, *hidden_sizes], 1, generator)
+        self.policy = PolicyPrior(obs_size, action_size, hidden_sizes, generator)
+
+    def both(self, obs: torch.Tensor, actions: torch.Tensor, q: torch.nn.ModuleList | None = None) -> torch.Tensor:
+        """Both Q heads of `[n, obs]`, `[n, action]` -> `[2, n]` (of the target heads `q` if given)."""
+        x = torch.cat([(obs - self.policy.obs_mean) / self.policy.obs_std, actions], dim=-1)
+        return run_mlp(self.q if q is None else q, x[None].expand(2, -1, -1)).squeeze(-1) * self.scale
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        flat = obs.reshape(-1, obs.shape[-1])
+        return self.both(flat, self.policy(flat))[0].reshape(obs.shape[:-1])
+
+
+def fit_policy_value(agent, updates: int, seed: int, rows: int | None = None, alpha: float = 2.5) -> tuple[PolicyValue, dict[str, float]]:
+    """TD3+BC (Fujimoto & Gu 2021, their defaults: policy noise 0.2 clipped at 0.5, the policy
+    and target nets updated every 2nd step, tau 0.005, lr 3e-4) on the buffer's first `rows`
+    transitions, at the run's discount and layer sizes: Q and pi of a policy that improves on
+    the data's while staying near it (`alpha` weighs Q against cloning the data's actions), the
+    value TD-MPC plans with, fitted offline as `refit_value` fits V. Returns it and the fit's
+    last losses and mean Q."""
+    n, obs_size, action_size = rows or agent.buffer.size, agent.buffer.obs.shape[1], agent.buffer.actions.shape[1]
+    generator = torch.Generator().manual_seed(seed)
+    value = PolicyValue(obs_size, action_size, agent.mpc.hidden_sizes, agent.mpc.discount, generator)
+    value.policy.obs_mean.copy_(agent.model.in_mean[:obs_size])
+    value.policy.obs_std.copy_(agent.model.in_std[:obs_size])
+    q_target, policy_target = copy.deepcopy(value.q).requires_grad_(False), copy.deepcopy(value.policy).requires_grad_(False)
+    q_optimizer = torch.optim.Adam(value.q.parameters(), lr=3e-4)
+    policy_optimizer = torch.optim.Adam(value.policy.parameters(), lr=3e-4)
+    buffer = agent.buffer
+    actions = (2.0 * (buffer.actions[:n] - agent.low.cpu()) / (agent.high - agent.low).cpu() - 1.0).clamp(-1.0, 1.0)  # the planner's units
+    obs, rewards, next_obs = buffer.obs[:n], buffer.rewards[:n], buffer.next_obs[:n]
+    metrics: dict[str, float] = {}
+    for step in range(updates):
+        idx = torch.randint(n, (agent.mpc.batch_size,), generator=generator)
+        with torch.no_grad():  # TD3's target: the target policy's action, smoothed, at the smaller target Q
+            noise = (torch.randn(len(idx), action_size, generator=generator) * 0.2).clamp(-0.5, 0.5)
+            next_action = (policy_target(next_obs[idx]) + noise).clamp(-1.0, 1.0)
+            target = rewards[idx] + value.discount * value.both(next_obs[idx], next_action, q_target).min(dim=0).values
+        q_loss = (((value.both(obs[idx], actions[idx]) - target) / value.scale) ** 2).mean()
+        q_optimizer.zero_grad()
+        q_loss.backward()
+        q_optimizer.step()
+        if step % 2:  # delayed policy update: Q scaled by its own size (TD3+BC's lambda) plus cloning
+            chosen = value.policy(obs[idx])
+            q = value.both(obs[idx], chosen)[0]
+            policy_loss = -alpha * q.mean() / q.abs().mean().detach() + ((chosen - actions[idx]) ** 2).mean()
+            policy_optimizer.zero_grad()
+            policy_loss.backward()
+            policy_optimizer.step()
+            with torch.no_grad():
+                for slow, fast in zip([*q_target.parameters(), *policy_target.parameters()], [*value.q.parameters(), *value.policy.parameters()]):
+                    slow.lerp_(fast, 0.005)
+            metrics = {"q_loss": q_loss.item(), "policy_loss": policy_loss.item(), "q_mean": q.mean().item()}
+    return value.requires_grad_(False), metrics
+
+
 def saved_value(agent, path: Path) -> tuple[str, TerminalValue, dict]:
     """The terminal value saved in the checkpoint at `path` (the same run at another step), to
     plan with in place of the run's own: its label, the value (with its own input statistics)
@@ -215,6 +286,9 @@ def main() -> None:
                         help="fit the value refit that reads every input (--no-value-all-inputs: only the --value-inputs one, the other measured already)")
     parser.add_argument("--value-discount", type=float, nargs="+", default=[],
                         help="also a value refit (all inputs) with each of these discounts, planned with it (the run's: mpc.discount)")
+    parser.add_argument("--policy-value", type=int, default=0,
+                        help="also plan with TD-MPC's value, Q(s, pi(s)) of a policy fitted offline by TD3+BC for this many steps on --rows, "
+                             "alone and with pi's rollouts proposed (0: skip it)")
     parser.add_argument("--value-heads", type=int, default=1, help="also a value refit of this many heads (1: none)")
     parser.add_argument("--value-pessimism", type=float, nargs="+", default=[0.0], help="plan with the heads' mean minus each of these x their std")
     parser.add_argument("--heads-alone", type=int, default=0, help="also plan with each of the first N of those heads alone")
@@ -227,8 +301,9 @@ def main() -> None:
     args = parser.parse_args()
     run = load_run(args.run)
     agent = run.agent
-    if (args.value_refit or args.value_from) and agent.value is None:
-        sys.exit(f"error: {args.run}: --value-refit and --value-from need a run with mpc.terminal_value: true (this one plans without a value)")
+    if (args.value_refit or args.value_from or args.policy_value) and agent.value is None:
+        sys.exit(f"error: {args.run}: --value-refit, --value-from and --policy-value need a run with mpc.terminal_value: true "
+                 "(this one plans without a value)")
     obj, hand = (slice(*(int(x) for x in s.split(":"))) for s in (args.object, args.hand))
     agent.load_state_dict(load_checkpoint(args.run / "checkpoint.pt")["agent"])  # the buffer: the final policy file has none
     if args.rows is not None and not 0 < args.rows <= agent.buffer.size:
@@ -287,36 +362,52 @@ def main() -> None:
             values[f"{label}, + {args.value_from_updates} TD steps"] = fitted
             print(f"{label}: {args.value_from_updates} more steps in {time.perf_counter() - start:.0f} s, {source['fit']}")
         payload.setdefault("value_from", []).append(source)
+    policies: dict[str, PolicyValue] = {}
+    if args.policy_value:
+        start = time.perf_counter()
+        label = f"Q(s, pi(s)), TD3+BC {args.policy_value} steps"
+        policies[label], fit = fit_policy_value(agent, args.policy_value, seed=0, rows=args.rows)
+        print(f"{label}: in {time.perf_counter() - start:.0f} s, {fit}")
+        payload["policy_value"] = {"updates": args.policy_value, "rows": args.rows or agent.buffer.size, "fit": fit,
+                                   "proposals": PROPOSALS}
     if args.trials:
-        payload |= {"trials": args.trials, "planners": compare_planners(agent, run, args.trials, refits, args.bigger, values, args.own)}
+        payload |= {"trials": args.trials,
+                    "planners": compare_planners(agent, run, args.trials, refits, args.bigger, values, args.own, policies)}
     name = args.out or f"mpc_probe_{args.run.name}" + (f"_{'x'.join(map(str, args.hidden))}" if args.hidden else "")
     print(f"wrote {write_result(name, payload)}")
 
 
 def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble], bigger: bool = True,
-                     values: dict[str, TerminalValue] | None = None, own: bool = True) -> list[dict]:
+                     values: dict[str, TerminalValue] | None = None, own: bool = True,
+                     policies: dict[str, PolicyValue] | None = None) -> list[dict]:
     """Held-out success of the final model with its own planner (and with `BIGGER`, and without
     its terminal value where it has one; `own=False` skips these, measured already), of each of
-    `refits` with the run's own planner, and of the run's model and search with each of `values`
-    in place of its own."""
+    `refits` with the run's own planner, of the run's model and search with each of `values`
+    in place of its own, and with each of `policies` (TD-MPC's `Q(s, pi(s))`) alone and with
+    `PROPOSALS` rollouts of its pi among each round's candidates (the search started from pi's
+    own, as `mpc.prior_trajectories` does)."""
     task, task_file, stages = run.phases[-1]
-    own_model, own_planner, own_value = agent.model, agent.spec.planning, agent.value
-    plans = [("run's model", own_model, "as trained", {}, own_value)] if own else []
-    plans += [("run's model", own_model, "bigger search", BIGGER, own_value)] if bigger else []
+    own_model, own_planner, own_value, own_prior = agent.model, agent.spec.planning, agent.value, agent.prior
+    plans = [("run's model", own_model, "as trained", {}, own_value, None)] if own else []
+    plans += [("run's model", own_model, "bigger search", BIGGER, own_value, None)] if bigger else []
     # is it the terminal value that steers the plans? the same model and search, scored by reward alone
-    plans += [("run's model", own_model, "no terminal value", {}, None)] if own and own_value is not None else []
-    plans += [(label, model, "as trained", {}, own_value) for label, model in refits.items()]
+    plans += [("run's model", own_model, "no terminal value", {}, None, None)] if own and own_value is not None else []
+    plans += [(label, model, "as trained", {}, own_value, None) for label, model in refits.items()]
     # a value of another discount than the run's plans with its own (the horizon's rewards and V's weight)
-    plans += [("run's model", own_model, label, {} if value.discount == own_planner.discount else {"discount": value.discount}, value)
+    plans += [("run's model", own_model, label, {} if value.discount == own_planner.discount else {"discount": value.discount}, value, None)
               for label, value in (values or {}).items()]
+    for label, value in (policies or {}).items():
+        plans += [("run's model", own_model, label, {}, value, None),
+                  ("run's model", own_model, f"{label}, {PROPOSALS} of pi's rollouts proposed", {"prior_trajectories": PROPOSALS}, value, value.policy)]
     rows = []
-    for model_label, model, planner, change, value in plans:
+    for model_label, model, planner, change, value, prior in plans:
         agent.model, agent.mpc, agent.value = model, own_planner.model_copy(update=change), value
+        agent.prior = own_prior if prior is None else prior
         start = time.perf_counter()
         (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
         rows.append({"model": model_label, "planner": planner, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites", "discount"}),
                      "success_rate": result.as_dict()["success_rate"], "seconds": time.perf_counter() - start})
-    agent.model, agent.mpc, agent.value = own_model, own_planner, own_value
+    agent.model, agent.mpc, agent.value, agent.prior = own_model, own_planner, own_value, own_prior
     print_table(["model", "planner", "population x rounds x horizon", "held-out success", "s"],
                 [[r["model"], r["planner"], f"{r['population']} x {r['iterations']} x {r['horizon']}", f"{r['success_rate']:.2f}", r["seconds"]]
                  for r in rows])

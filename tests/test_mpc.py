@@ -757,7 +757,8 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     narrowed to `--value-inputs` gives the same value whatever the hand's x and y, the full
     one does not; each plans the held-out goal, after the run's own value and none. A run
     without a value is a one-line error, before any work. `--value-from` reads the value a
-    checkpoint saved, not the one the agent holds."""
+    checkpoint saved, not the one the agent holds. `--policy-value`'s TD3+BC Q values the demo's
+    states above the planner's, and its pi acts nearer the data than doing nothing."""
     (tmp_path / "plain").mkdir()
     plain, _ = demos_run(tmp_path / "plain", "tasks/metaworld/pick_place.yaml", "pick", episodes=1, planned_steps=400)
     monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
@@ -806,6 +807,14 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     assert source["fit"]["value_loss"] >= 0, source
     label = f"value saved at step {result['step']:,}"
     assert [row["planner"] for row in result["planners"]] == [label, f"{label}, + 20 TD steps"]
+    # `--policy-value` plans with TD3+BC's Q(s, pi(s)), alone and with pi's rollouts proposed
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "1", "--no-bigger", "--no-own",
+                                     "--policy-value", "20", "--out", "policy"])
+    mpc_probe.main()
+    result = json.loads((tmp_path / "results/policy.json").read_text())
+    policy = "Q(s, pi(s)), TD3+BC 20 steps"
+    assert [row["planner"] for row in result["planners"]] == [policy, f"{policy}, 5 of pi's rollouts proposed"]
+    assert set(result["policy_value"]["fit"]) == {"q_loss", "policy_loss", "q_mean"}, result["policy_value"]
     for path, error in ((plain.parent / "checkpoint.pt", "this checkpoint has no terminal value"), (tmp_path / "none.pt", "expects a checkpoint.pt file")):
         monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "0", "--value-from", str(path)])
         with pytest.raises(SystemExit, match=error):
@@ -830,6 +839,14 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     (near, _), (far, _) = (mpc_probe.refit_value(agent, 300, seed=0, discount=gamma) for gamma in (0.5, None))
     with torch.no_grad():  # a value of a lower discount sums fewer of the same (positive) rewards
         assert (near.discount, far.discount) == (0.5, 0.9) and near(obs).mean() < far(obs).mean(), (near(obs).mean(), far(obs).mean())
+    # TD3+BC's Q values the demo's states (which earned the pick reward) above the planner's, and
+    # its pi acts in the planner's [-1, 1] nearer the data's actions than doing nothing does
+    policy_value, _ = mpc_probe.fit_policy_value(agent, 300, seed=0)
+    unit = 2.0 * (agent.buffer.actions[: agent.buffer.size] - agent.low) / (agent.high - agent.low) - 1.0
+    with torch.no_grad():
+        assert policy_value(obs[:transitions]).mean() > policy_value(obs[transitions:]).mean()
+        chosen = policy_value.policy(obs)
+        assert chosen.abs().max() <= 1 and ((chosen - unit) ** 2).mean() < (unit**2).mean(), (chosen - unit).pow(2).mean()
     for inputs in (None, mpc_probe.RELATIVE_INPUTS):
         value, _ = mpc_probe.refit_value(agent, 300, seed=0, inputs=inputs)
         with torch.no_grad():
