@@ -42,7 +42,8 @@
    misleads the planner, where the value of a policy that improves on it would not? Q and pi
    fitted offline by TD3+BC on the first `--rows` transitions, the planner scoring a plan's
    last state by `Q(s, pi(s))`, once alone and once with 5 of pi's rollouts through the model
-   among each round's candidates (TD-MPC's policy-guided trajectories, `mpc.prior_trajectories`).
+   among each round's candidates (TD-MPC's policy-guided trajectories, `mpc.prior_trajectories`),
+   after pi acting alone (no model, no search: what the planner adds to TD3+BC's policy).
 
     python benchmarks/mpc_probe.py benchmarks/runs/model_based/mpc-push-seed0 [--trials 10] [--object 4:7]
                                    [--refit 40000] [--oversample 0.5] [--hidden 256 256 256]
@@ -69,6 +70,7 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
+from benchmarks.mpc_prior_probe import PriorOnly  # noqa: E402
 from taskforge.agents.dynamics import DynamicsEnsemble, ensemble_mlp, run_mlp  # noqa: E402
 from taskforge.agents.prior import PolicyPrior  # noqa: E402
 from taskforge.agents.value import TerminalValue  # noqa: E402
@@ -383,7 +385,8 @@ def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble
     """Held-out success of the final model with its own planner (and with `BIGGER`, and without
     its terminal value where it has one; `own=False` skips these, measured already), of each of
     `refits` with the run's own planner, of the run's model and search with each of `values`
-    in place of its own, and with each of `policies` (TD-MPC's `Q(s, pi(s))`) alone and with
+    in place of its own, and with each of `policies` (TD-MPC's `Q(s, pi(s))`; first its pi
+    acting alone, no model and no search) alone and with
     `PROPOSALS` rollouts of its pi among each round's candidates (the search started from pi's
     own, as `mpc.prior_trajectories` does)."""
     task, task_file, stages = run.phases[-1]
@@ -397,14 +400,17 @@ def compare_planners(agent, run, trials: int, refits: dict[str, DynamicsEnsemble
     plans += [("run's model", own_model, label, {} if value.discount == own_planner.discount else {"discount": value.discount}, value, None)
               for label, value in (values or {}).items()]
     for label, value in (policies or {}).items():
-        plans += [("run's model", own_model, label, {}, value, None),
+        plans += [("no model", None, f"{label}: pi alone, no search", {}, value, value.policy),
+                  ("run's model", own_model, label, {}, value, None),
                   ("run's model", own_model, f"{label}, {PROPOSALS} of pi's rollouts proposed", {"prior_trajectories": PROPOSALS}, value, value.policy)]
     rows = []
     for model_label, model, planner, change, value, prior in plans:
         agent.model, agent.mpc, agent.value = model, own_planner.model_copy(update=change), value
         agent.prior = own_prior if prior is None else prior
+        # pi's own row: the policy acting alone on the same goals (does the search add to it?)
+        player = PriorOnly(agent) if model is None else agent
         start = time.perf_counter()
-        (result,) = evaluate_rows(agent, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
+        (result,) = evaluate_rows(player, task, task_file, [(stages[-1], None)], "test", trials, 1, seed=0, stop_on_success=True)
         rows.append({"model": model_label, "planner": planner, **agent.mpc.model_dump(include={"population", "iterations", "horizon", "elites", "discount"}),
                      "success_rate": result.as_dict()["success_rate"], "seconds": time.perf_counter() - start})
     agent.model, agent.mpc, agent.value, agent.prior = own_model, own_planner, own_value, own_prior

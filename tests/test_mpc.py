@@ -813,7 +813,8 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     mpc_probe.main()
     result = json.loads((tmp_path / "results/policy.json").read_text())
     policy = "Q(s, pi(s)), TD3+BC 20 steps"
-    assert [row["planner"] for row in result["planners"]] == [policy, f"{policy}, 5 of pi's rollouts proposed"]
+    assert [row["planner"] for row in result["planners"]] == [f"{policy}: pi alone, no search", policy, f"{policy}, 5 of pi's rollouts proposed"]
+    assert [row["model"] for row in result["planners"]] == ["no model", "run's model", "run's model"]
     assert set(result["policy_value"]["fit"]) == {"q_loss", "policy_loss", "q_mean"}, result["policy_value"]
     for path, error in ((plain.parent / "checkpoint.pt", "this checkpoint has no terminal value"), (tmp_path / "none.pt", "expects a checkpoint.pt file")):
         monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "0", "--value-from", str(path)])
