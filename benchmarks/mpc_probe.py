@@ -208,7 +208,7 @@ def fit_policy_value(agent, updates: int, seed: int, rows: int | None = None, al
     q_optimizer = torch.optim.Adam(value.q.parameters(), lr=3e-4)
     policy_optimizer = torch.optim.Adam(value.policy.parameters(), lr=3e-4)
     buffer = agent.buffer
-    actions = (2.0 * (buffer.actions[:n] - agent.low.cpu()) / (agent.high - agent.low).cpu() - 1.0).clamp(-1.0, 1.0)  # the planner's units
+    actions = agent.to_unit(buffer.actions[:n].to(agent.device)).cpu()  # the planner's units
     obs, rewards, next_obs = buffer.obs[:n], buffer.rewards[:n], buffer.next_obs[:n]
     metrics: dict[str, float] = {}
     for step in range(updates):

@@ -267,6 +267,11 @@ class MPCAgent:
         """Actions planned in [-1, 1] onto the env's box."""
         return self.low + (unit + 1.0) * 0.5 * (self.high - self.low)
 
+    def to_unit(self, env_actions: torch.Tensor) -> torch.Tensor:
+        """Actions in the env's box onto the planner's [-1, 1] (`_scale`'s inverse, clamped): how
+        the demos' and the buffer's actions reach what learns in the planner's units."""
+        return (2.0 * (env_actions - self.low) / (self.high - self.low) - 1.0).clamp(-1.0, 1.0)
+
     def _to_env(self, unit: torch.Tensor) -> np.ndarray:
         return self._scale(unit.to(self.device)).cpu().numpy().astype(self.action_space.dtype)
 
@@ -411,7 +416,7 @@ class MPCAgent:
         assert self.prior is not None
         obs = torch.as_tensor(np.asarray(observations), dtype=torch.float32, device=self.device)
         env_actions = torch.as_tensor(np.asarray(actions), dtype=torch.float32, device=self.device)
-        unit = (2.0 * (env_actions - self.low) / (self.high - self.low) - 1.0).clamp(-1.0, 1.0)
+        unit = self.to_unit(env_actions)
         with torch_threads(update_threads(self.spec.runtime)):
             return self.prior.fit(obs, unit, epochs, batch_size, learning_rate, self.generator)
 
