@@ -71,8 +71,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
 from benchmarks.mpc_prior_probe import PriorOnly  # noqa: E402
-from taskforge.agents.dynamics import DynamicsEnsemble, ensemble_mlp, run_mlp  # noqa: E402
-from taskforge.agents.prior import PolicyPrior  # noqa: E402
+from taskforge.agents.dynamics import DynamicsEnsemble  # noqa: E402
+from taskforge.agents.policy_value import PolicyValue  # noqa: E402
 from taskforge.agents.value import TerminalValue  # noqa: E402
 from taskforge.rollouts import evaluate_rows  # noqa: E402
 from taskforge.run import load_checkpoint, load_run  # noqa: E402
@@ -171,67 +171,19 @@ def refit_value(agent, updates: int, seed: int, inputs: list[int] | None = None,
     return value, metrics
 
 
-class PolicyValue(torch.nn.Module):
-    """TD-MPC's terminal value: the learnt policy's own Q, `Q(s, pi(s))`, as the planner scores a
-    plan's last state (`[..., obs]` -> `[...]`), with `pi` (`policy`, a `PolicyPrior`) to
-    propose rollouts. Twin Q heads as TD3's; the planner reads the first, as TD3's actor does."""
-
-    def __init__(self, obs_size: int, action_size: int, hidden_sizes: list[int], discount: float, generator: torch.Generator):
-        super().__init__()
-        self.discount, self.scale = discount, 1.0 / (1.0 - discount)
-        self.q = ensemble_mlp(2, [obs_size + action_size, *hidden_sizes], 1, generator)
-        self.policy = PolicyPrior(obs_size, action_size, hidden_sizes, generator)
-
-    def both(self, obs: torch.Tensor, actions: torch.Tensor, q: torch.nn.ModuleList | None = None) -> torch.Tensor:
-        """Both Q heads of `[n, obs]`, `[n, action]` -> `[2, n]` (of the target heads `q` if given)."""
-        x = torch.cat([(obs - self.policy.obs_mean) / self.policy.obs_std, actions], dim=-1)
-        return run_mlp(self.q if q is None else q, x[None].expand(2, -1, -1)).squeeze(-1) * self.scale
-
-    def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        flat = obs.reshape(-1, obs.shape[-1])
-        return self.both(flat, self.policy(flat))[0].reshape(obs.shape[:-1])
-
-
-def fit_policy_value(agent, updates: int, seed: int, rows: int | None = None, alpha: float = 2.5) -> tuple[PolicyValue, dict[str, float]]:
-    """TD3+BC (Fujimoto & Gu 2021, their defaults: policy noise 0.2 clipped at 0.5, the policy
-    and target nets updated every 2nd step, tau 0.005, lr 3e-4) on the buffer's first `rows`
-    transitions, at the run's discount and layer sizes: Q and pi of a policy that improves on
-    the data's while staying near it (`alpha` weighs Q against cloning the data's actions), the
-    value TD-MPC plans with, fitted offline as `refit_value` fits V. Returns it and the fit's
-    last losses and mean Q."""
+def fit_policy_value(agent, updates: int, seed: int, rows: int | None = None) -> tuple[PolicyValue, dict[str, float]]:
+    """TD-MPC's terminal value as `mpc.value_policy` fits it (TD3+BC, agents/policy_value.py),
+    fresh, for `updates` steps on the buffer's first `rows` transitions at the run's discount,
+    layer sizes and alpha: the value of a policy that improves on the data's while staying near
+    it, fitted offline as `refit_value` fits V. Returns it and its fit's metrics."""
     n, obs_size, action_size = rows or agent.buffer.size, agent.buffer.obs.shape[1], agent.buffer.actions.shape[1]
     generator = torch.Generator().manual_seed(seed)
-    value = PolicyValue(obs_size, action_size, agent.mpc.hidden_sizes, agent.mpc.discount, generator)
-    value.policy.obs_mean.copy_(agent.model.in_mean[:obs_size])
-    value.policy.obs_std.copy_(agent.model.in_std[:obs_size])
-    q_target, policy_target = copy.deepcopy(value.q).requires_grad_(False), copy.deepcopy(value.policy).requires_grad_(False)
-    q_optimizer = torch.optim.Adam(value.q.parameters(), lr=3e-4)
-    policy_optimizer = torch.optim.Adam(value.policy.parameters(), lr=3e-4)
+    mpc = agent.mpc
+    value = PolicyValue(obs_size, action_size, mpc.hidden_sizes, mpc.discount, mpc.value_tau, generator, mpc.value_policy_alpha)
     buffer = agent.buffer
     actions = agent.to_unit(buffer.actions[:n].to(agent.device)).cpu()  # the planner's units
-    obs, rewards, next_obs = buffer.obs[:n], buffer.rewards[:n], buffer.next_obs[:n]
-    metrics: dict[str, float] = {}
-    for step in range(updates):
-        idx = torch.randint(n, (agent.mpc.batch_size,), generator=generator)
-        with torch.no_grad():  # TD3's target: the target policy's action, smoothed, at the smaller target Q
-            noise = (torch.randn(len(idx), action_size, generator=generator) * 0.2).clamp(-0.5, 0.5)
-            next_action = (policy_target(next_obs[idx]) + noise).clamp(-1.0, 1.0)
-            target = rewards[idx] + value.discount * value.both(next_obs[idx], next_action, q_target).min(dim=0).values
-        q_loss = (((value.both(obs[idx], actions[idx]) - target) / value.scale) ** 2).mean()
-        q_optimizer.zero_grad()
-        q_loss.backward()
-        q_optimizer.step()
-        if step % 2:  # delayed policy update: Q scaled by its own size (TD3+BC's lambda) plus cloning
-            chosen = value.policy(obs[idx])
-            q = value.both(obs[idx], chosen)[0]
-            policy_loss = -alpha * q.mean() / q.abs().mean().detach() + ((chosen - actions[idx]) ** 2).mean()
-            policy_optimizer.zero_grad()
-            policy_loss.backward()
-            policy_optimizer.step()
-            with torch.no_grad():
-                for slow, fast in zip([*q_target.parameters(), *policy_target.parameters()], [*value.q.parameters(), *value.policy.parameters()]):
-                    slow.lerp_(fast, 0.005)
-            metrics = {"q_loss": q_loss.item(), "policy_loss": policy_loss.item(), "q_mean": q.mean().item()}
+    metrics = value.fit(buffer.obs[:n], actions, buffer.rewards[:n], buffer.next_obs[:n], agent.model.in_mean[:obs_size],
+                        agent.model.in_std[:obs_size], value.optimizers(), updates, mpc.batch_size, generator)
     return value.requires_grad_(False), metrics
 
 

@@ -17,6 +17,7 @@ from taskforge.agents import MPCAgent, make_vector_env
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.mpc import TransitionBuffer
 from taskforge.agents.planners import plan
+from taskforge.agents.policy_value import PolicyValue
 from taskforge.agents.value import TerminalValue
 from taskforge.agents.weights import WeightsMismatch
 from taskforge.cli import main
@@ -129,6 +130,26 @@ def test_the_terminal_value_learns_the_discounted_sum_of_rewards():
     assert 4.0 < metrics["value_mean"] < 6.0  # 10 x the mean state, 0.5
 
 
+def test_the_policy_value_learns_a_policy_better_than_the_data_and_its_q():
+    """TD3+BC on a one-step problem: state s in [0, 1] stays put, the reward -|a - (2s - 1)| pays
+    for matching an action to the state, and the data's actions are uniform. Its policy learns to
+    match (the data's own actions do not: their mean is 0 everywhere), and `Q(s, pi(s))`, the
+    planner's score, is worth more than what the data's behaviour earns."""
+    gen = torch.Generator().manual_seed(0)
+    value = PolicyValue(1, 1, [64, 64], discount=0.5, tau=0.05, generator=gen)
+    s = torch.rand((4000, 1), generator=gen)
+    a = torch.rand((4000, 1), generator=gen) * 2 - 1
+    best = 2 * s - 1
+    reward = -(a - best).abs()[:, 0]
+    metrics = value.fit(s, a, reward, s, s.mean(0), s.std(0), value.optimizers(), updates=3000, batch=256, generator=gen)
+    with torch.no_grad():
+        chosen = value.policy(s)
+        # measured: the policy's error 0.04 (the data's 0.67), its value -0.39 against the data's -1.33
+        assert (chosen - best).abs().mean() < 0.3
+        assert value(s).mean() > 2 * reward.mean()  # the data's behaviour is worth reward / (1 - 0.5)
+    assert np.isfinite(metrics["value_loss"]) and {"policy_loss", "value_mean"} <= set(metrics)
+
+
 def test_value_heads_agree_on_the_data_and_pessimism_marks_down_where_they_do_not():
     """`value_ensemble` heads, each on its own bootstrap draw against its own target head, learn
     the same discounted sum (10 s) where the data is (s in [0, 1]) and part ways off it (s = 3);
@@ -224,7 +245,9 @@ def write(folder, total_steps: int, mpc: dict | None = None, **curriculum) -> ob
     return path
 
 
-@pytest.mark.parametrize("mpc", [{}, {"terminal_value": True, "discount": 0.95}], ids=["model-only", "terminal-value"])
+@pytest.mark.parametrize("mpc", [{}, {"terminal_value": True, "discount": 0.95},
+                                 {"terminal_value": True, "discount": 0.95, "value_policy": True, "prior_trajectories": 3}],
+                         ids=["model-only", "terminal-value", "policy-value"])
 def test_mpc_learns_to_reach_observed_goals_through_the_curriculum_and_resumes(tmp_path, capsys, mpc):
     """400 random steps, then planning with the model refitted every 400 steps: the held-out goals
     (20, on the semicircle, 1 m away, within 0.1 m) are reached within 2,000 steps, where random
@@ -402,6 +425,41 @@ def test_an_agent_with_value_heads_ranks_states_and_resumes_them_only_into_as_ma
         torch.testing.assert_close(resumed.value(x), agent.value(x))
     with pytest.raises(WeightsMismatch, match="terminal value 'net.0.weight' has shape"):  # `init_from`
         _value_agent().load_weights(torch.load(tmp_path / "agent.pt", weights_only=True))
+
+
+def test_the_policy_value_ranks_states_proposes_its_policys_rollouts_and_resumes(tmp_path):
+    """`value_policy` through the agent: Q(s, pi(s)) fitted on the reach walks' rows ranks their
+    states by closeness to the goal as V does; with `prior_trajectories` its policy is the one
+    that proposes, and stays so across a fresh refit; a checkpoint restores Q, pi and both
+    optimizers (the policy saved once, with the value)."""
+    obs, actions, distance, starts = _point_mass_walks()
+    agent = _value_agent(value_policy=True, prior_trajectories=3, value_refit_every=1000, value_refit_updates=600)
+    assert agent.prior is agent.value.policy
+    agent.add_demonstrations(obs, actions, -distance, starts, "reach")
+    metrics = agent.update()
+    assert metrics["value_refit"] == 1.0 and agent.prior is agent.value.policy  # the refit's new policy proposes
+    assert _ranks_by_closeness(agent, obs, distance) > 0.8
+    first, _ = agent.act(obs[:5])
+    assert first.shape == (5, 2) and np.all(np.abs(first) <= 1.0)
+    state = agent.state_dict()
+    assert "prior" not in state and {"value", "policy_optimizer"} <= set(state)
+    torch.save(state, tmp_path / "agent.pt")
+    resumed = _value_agent(value_policy=True, prior_trajectories=3, value_refit_every=1000, value_refit_updates=600)
+    resumed.load_state_dict(torch.load(tmp_path / "agent.pt", weights_only=True))
+    x = torch.as_tensor(obs[:100])
+    with torch.no_grad():
+        torch.testing.assert_close(resumed.value(x), agent.value(x))
+        torch.testing.assert_close(resumed.prior(x), agent.prior(x))
+    assert resumed.policy_optimizer.state_dict()["state"].keys() == agent.policy_optimizer.state_dict()["state"].keys()
+    with pytest.raises(WeightsMismatch):  # `init_from` a run whose terminal value is V
+        _value_agent().load_weights(torch.load(tmp_path / "agent.pt", weights_only=True))
+
+
+def test_the_policy_value_is_a_kind_of_terminal_value_with_one_head():
+    with pytest.raises(ValueError, match="'value_policy' is the terminal value's kind"):
+        MPCSpec(value_policy=True)
+    with pytest.raises(ValueError, match="'value_policy' has one Q of one policy"):
+        MPCSpec(value_policy=True, terminal_value=True, discount=0.9, value_ensemble=3)
 
 
 def test_a_value_refit_needs_a_value():
@@ -815,7 +873,7 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
     policy = "Q(s, pi(s)), TD3+BC 20 steps"
     assert [row["planner"] for row in result["planners"]] == [f"{policy}: pi alone, no search", policy, f"{policy}, 5 of pi's rollouts proposed"]
     assert [row["model"] for row in result["planners"]] == ["no model", "run's model", "run's model"]
-    assert set(result["policy_value"]["fit"]) == {"q_loss", "policy_loss", "q_mean"}, result["policy_value"]
+    assert set(result["policy_value"]["fit"]) == {"value_loss", "policy_loss", "value_mean"}, result["policy_value"]
     for path, error in ((plain.parent / "checkpoint.pt", "this checkpoint has no terminal value"), (tmp_path / "none.pt", "expects a checkpoint.pt file")):
         monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "0", "--value-from", str(path)])
         with pytest.raises(SystemExit, match=error):

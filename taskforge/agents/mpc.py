@@ -56,6 +56,7 @@ from gymnasium.vector import VectorEnv
 
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.planners import plan, shift
+from taskforge.agents.policy_value import PolicyValue
 from taskforge.agents.prior import PolicyPrior
 from taskforge.agents.runtime import check_same_step_autoreset, torch_threads, update_threads
 from taskforge.agents.value import TerminalValue
@@ -159,12 +160,12 @@ class MPCAgent:
         self.model = DynamicsEnsemble(obs_size, self.action_size, self.mpc, self.generator).to(self.device)
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=self.mpc.learning_rate, weight_decay=self.mpc.weight_decay)
         self.buffer = TransitionBuffer(self.mpc.buffer_size, obs_size, self.action_size)
-        self.value: TerminalValue | None = None
+        self.value: TerminalValue | PolicyValue | None = None
         self.value_refits = 0  # fresh refits of the value so far (`mpc.value_refit_every`)
-        if self.mpc.terminal_value:
-            self._new_value()
         self.prior: PolicyPrior | None = None
-        if self.mpc.prior_trajectories:  # fitted by `fit_prior` at the warm start
+        if self.mpc.terminal_value:
+            self._new_value()  # with `value_policy` and proposals, its policy is the prior
+        if self.mpc.prior_trajectories and not self.mpc.value_policy:  # fitted by `fit_prior` at the warm start
             self.prior = PolicyPrior(obs_size, self.action_size, self.mpc.hidden_sizes, self.generator).to(self.device)
         self.low = torch.as_tensor(action_space.low, dtype=torch.float32, device=self.device)
         self.high = torch.as_tensor(action_space.high, dtype=torch.float32, device=self.device)
@@ -332,11 +333,19 @@ class MPCAgent:
                 self.stage = self._tag(stage)
 
     def _new_value(self) -> None:
-        """V and its optimizer from new weights (drawn from `generator`): at the start, and at
-        each fresh refit."""
-        self.value = TerminalValue(self.observation_space.shape[0], self.mpc.hidden_sizes, self.mpc.discount,
-                                   self.mpc.value_tau, self.generator, self.mpc.value_ensemble,
-                                   self.mpc.value_pessimism).to(self.device)
+        """The terminal value and its optimizer(s) from new weights (drawn from `generator`): at
+        the start, and at each fresh refit. With `value_policy`, its policy is the one that
+        proposes (`prior`), so a refit renews the proposals too."""
+        obs_size = self.observation_space.shape[0]
+        if self.mpc.value_policy:
+            self.value = PolicyValue(obs_size, self.action_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau,
+                                     self.generator, self.mpc.value_policy_alpha).to(self.device)
+            self.value_optimizer, self.policy_optimizer = self.value.optimizers()
+            if self.mpc.prior_trajectories:
+                self.prior = self.value.policy
+            return
+        self.value = TerminalValue(obs_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau, self.generator,
+                                   self.mpc.value_ensemble, self.mpc.value_pessimism).to(self.device)
         self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
 
     def update(self) -> dict[str, float]:
@@ -389,10 +398,14 @@ class MPCAgent:
                 self.value_refits = self.global_step // mpc.value_refit_every + 1
                 updates = mpc.value_refit_updates
                 metrics["value_refit"] = 1.0
-            assert self.value is not None
-            metrics |= self.value.fit(inputs[stage, :obs_size], targets[stage, obs_size], landed,
-                                      model.in_mean[:obs_size], model.in_std[:obs_size], self.value_optimizer,
-                                      updates, batch, self.generator)
+            obs, rewards, mean, std = inputs[stage, :obs_size], targets[stage, obs_size], model.in_mean[:obs_size], model.in_std[:obs_size]
+            if isinstance(self.value, PolicyValue):  # Q and pi also read the actions taken, in the planner's units
+                optimizers = (self.value_optimizer, self.policy_optimizer)
+                metrics |= self.value.fit(obs, self.to_unit(inputs[stage, obs_size:]), rewards, landed, mean, std, optimizers,
+                                          updates, batch, self.generator)
+            else:
+                assert self.value is not None
+                metrics |= self.value.fit(obs, rewards, landed, mean, std, self.value_optimizer, updates, batch, self.generator)
         return metrics
 
     def add_demonstrations(self, observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
@@ -438,7 +451,9 @@ class MPCAgent:
             state |= {"plan_generator": self.plan_generator.get_state(), "plan_device": self.device.type}
         if self.value is not None:
             state |= {"value": self.value.state_dict(), "value_optimizer": self.value_optimizer.state_dict()}
-        if self.prior is not None:
+        if self.mpc.value_policy:  # its policy (the prior, with proposals) is saved with the value
+            state["policy_optimizer"] = self.policy_optimizer.state_dict()
+        elif self.prior is not None:
             state["prior"] = self.prior.state_dict()
         return state
 
@@ -473,7 +488,9 @@ class MPCAgent:
         if self.value is not None:
             self.value.load_state_dict(state["value"])
             self.value_optimizer.load_state_dict(state["value_optimizer"])
-        if self.prior is not None:
+        if self.mpc.value_policy:
+            self.policy_optimizer.load_state_dict(state["policy_optimizer"])
+        elif self.prior is not None:
             self.prior.load_state_dict(state["prior"])
         self.buffer.load_state_dict(state["buffer"])
         self.generator.set_state(state["generator"])

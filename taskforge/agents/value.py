@@ -31,11 +31,20 @@ TD-MPC (Hansen et al. 2022) close that gap with a value at the horizon's end. De
 from __future__ import annotations
 
 import copy
+from collections.abc import Iterable
 
 import torch
 from torch import nn
 
 from taskforge.agents.dynamics import ensemble_mlp, run_mlp
+
+
+def polyak(slow: Iterable[torch.Tensor], fast: Iterable[torch.Tensor], tau: float) -> None:
+    """A target network's step toward its network: slow <- (1 - tau) slow + tau fast (DQN's and
+    SAC's device, so a bootstrap target does not chase its own update)."""
+    with torch.no_grad():
+        for s, f in zip(slow, fast):
+            s.lerp_(f, tau)
 
 
 class TerminalValue(nn.Module):
@@ -87,9 +96,7 @@ class TerminalValue(nn.Module):
             loss.backward()
             optimizer.step()
             total += loss.item()
-            with torch.no_grad():  # Polyak: V' <- (1 - tau) V' + tau V
-                for slow, fast in zip(self.target.parameters(), self.net.parameters()):
-                    slow.lerp_(fast, self.tau)
+            polyak(self.target.parameters(), self.net.parameters(), self.tau)
         with torch.no_grad():
             values = self.each(obs[torch.randint(len(rewards), (min(2048, len(rewards)),), generator=generator).to(obs.device)])
         metrics = {"value_loss": total / updates, "value_mean": values.mean().item()}

@@ -96,9 +96,11 @@ def load_curriculum(path: str | Path) -> ResolvedCurriculum:
     demos_file = None
     if spec.warm_start is not None and not issues:
         demos_file = _check_warm_start(spec, path, agent, phases, issues)
-    if agent is not None and agent.algo == "mpc" and agent.planning.prior_trajectories and spec.warm_start is None:
+    if agent is not None and agent.algo == "mpc" and agent.planning.prior_trajectories and not agent.planning.value_policy \
+            and spec.warm_start is None:
         msg = (f"{agent.planning.prior_trajectories} proposals of a policy cloned from demonstrations, but {path} has no "
-               "warm_start to clone it from; expected 0, or a warm_start section in the curriculum")
+               "warm_start to clone it from; expected 0, a warm_start section in the curriculum, or mpc.value_policy: true (its "
+               "learnt policy proposes)")
         issues.append(SpecIssue(str(agent_file), "mpc.prior_trajectories", msg))
     init_from = None
     if spec.init_from is not None:

@@ -189,13 +189,24 @@ class MPCSpec(StrictModel):
     value_refit_updates: int = Field(default=40_000, ge=1)
     """TD(0) steps of each fresh refit (40k: what the measured offline refit took; 2-13 min on 2
     CPU cores at 3 x 256 as the machine's speed varies between sessions, one V or 5 heads alike)."""
+    value_policy: bool = False
+    """Score a plan's last state by `Q(s, pi(s))` of a policy `pi` fitted on the buffer by TD3+BC
+    (TD-MPC's value, Hansen et al. 2022; agents/policy_value.py) instead of V, the value of the
+    data's behaviour; with `prior_trajectories`, `pi`'s rollouts are the proposals (no warm start
+    needed). Fitted like V: `model_updates` steps per fit, afresh at each `value_refit_every`.
+    Why: with push seed 1's model and search fixed, every V refitted on its first 100k
+    transitions planned 0.10-0.30 of 30 held-out goals, this Q 0.60 and with 5 of pi's rollouts
+    proposed 0.87 (benchmarks/RESULTS.md). Needs `terminal_value`; not with `value_ensemble`."""
+    value_policy_alpha: float = Field(default=2.5, gt=0.0)
+    """TD3+BC's alpha: the weight of Q (scaled by its own mean size) against cloning the
+    buffer's actions in pi's loss (Fujimoto & Gu 2021's 2.5). Smaller keeps pi nearer the data."""
     prior_trajectories: int = Field(default=0, ge=0)
     """Candidates per planning round proposed by a policy cloned from the warm start's demos,
     each its rollout through the model for `horizon` steps (MoDem, Hansen et al. 2022; TD-MPC's
     policy-guided trajectories; agents/prior.py). They join every round's candidates, and the
     search starts from the first (noise-free) one instead of the previous plan: `init_std` is
     then the trust region around what the demos do (mpc.py's doc). 0: no prior. Needs a
-    `warm_start`."""
+    `warm_start`, or `value_policy` (whose learnt policy then proposes)."""
     prior_std: float = Field(default=0.1, ge=0.0)
     """Gaussian noise on each action of the proposals after the first (which is the policy's own,
     noise-free): the search's variations around what the demos did."""
@@ -215,6 +226,11 @@ class MPCSpec(StrictModel):
             raise ValueError(f"'value_refit_every' ({self.value_refit_every}) refits the terminal value: it needs 'terminal_value: true'")
         if (self.value_ensemble > 1 or self.value_pessimism) and not self.terminal_value:
             raise ValueError("'value_ensemble' and 'value_pessimism' shape the terminal value: they need 'terminal_value: true'")
+        if self.value_policy and not self.terminal_value:
+            raise ValueError("'value_policy' is the terminal value's kind: it needs 'terminal_value: true'")
+        if self.value_policy and (self.value_ensemble > 1 or self.value_pessimism):
+            raise ValueError(f"'value_policy' has one Q of one policy: expected 'value_ensemble' 1 and 'value_pessimism' 0 "
+                             f"(got {self.value_ensemble} and {self.value_pessimism:g})")
         if self.value_pessimism and self.value_ensemble < 2:
             raise ValueError(f"'value_pessimism' ({self.value_pessimism:g}) needs 'value_ensemble' >= 2: "
                              "it weighs the spread of the value heads")
