@@ -129,6 +129,8 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
         if cur.agent.algo == "mpc":  # the demos are the model's first data (and, with a prior, a cloned policy)
             prior = cur.agent.planning.prior_trajectories
             cloned = f"; a policy cloned from them ({ws.bc_epochs} epochs) proposes {prior} of each planning round's candidates and the search starts from it" if prior else ""
+            if prior and cur.agent.planning.value_policy:
+                cloned += " (the terminal value's policy, fitted on by TD3+BC from then on)"
             lines.append(f"  warm start from {source}: they seed the dynamics model's data, fitted on them before the first plan{cloned}")
         else:
             ft = ws.fine_tune

@@ -435,6 +435,9 @@ def test_the_policy_value_ranks_states_proposes_its_policys_rollouts_and_resumes
     obs, actions, distance, starts = _point_mass_walks()
     agent = _value_agent(value_policy=True, prior_trajectories=3, value_refit_every=1000, value_refit_updates=600)
     assert agent.prior is agent.value.policy
+    toward = np.clip(obs[:, 2:] - obs[:, :2], -1.0, 1.0)  # a warm start's demos are cloned into that policy
+    assert agent.fit_prior(obs, toward, epochs=30, batch_size=256, learning_rate=1e-3)["prior_bc_mse"] < 0.05
+    assert np.abs(agent.prior_act(obs[:200]) - toward[:200]).mean() < 0.2
     agent.add_demonstrations(obs, actions, -distance, starts, "reach")
     metrics = agent.update()
     assert metrics["value_refit"] == 1.0 and agent.prior is agent.value.policy  # the refit's new policy proposes
@@ -455,7 +458,25 @@ def test_the_policy_value_ranks_states_proposes_its_policys_rollouts_and_resumes
         _value_agent().load_weights(torch.load(tmp_path / "agent.pt", weights_only=True))
 
 
-def test_the_policy_value_is_a_kind_of_terminal_value_with_one_head():
+@pytest.mark.parametrize("from_prior", [True, False])
+def test_the_search_starts_from_the_prior_or_from_the_previous_plan(from_prior):
+    """`search_from_prior`: with a CEM that barely moves its mean (momentum 0.99), the plan's
+    first action is where the search started: the proposing policy's own action, or the
+    previous plan carried in the state (TD-MPC's warm start; the proposals only join)."""
+    obs, _, _, _ = _point_mass_walks(episodes=1, length=4)
+    agent = _value_agent(value_policy=True, prior_trajectories=2, search_from_prior=from_prior, momentum=0.99,
+                         iterations=1, population=4, elites=2)
+    previous = torch.full((4, agent.mpc.horizon, 2), 0.7)
+    first, _ = agent.act(obs, previous)
+    expected = agent.prior_act(obs) if from_prior else np.full((4, 2), 0.7, np.float32)
+    np.testing.assert_allclose(first, expected, atol=0.05)
+
+
+def test_the_policy_value_is_a_kind_of_terminal_value_with_one_head(tmp_path, capsys):
+    """Its policy proposes without demos: `validate` accepts `prior_trajectories` with no warm
+    start there, and still refuses it without `value_policy` (test above)."""
+    learnt = {"terminal_value": True, "discount": 0.95, "value_policy": True, "prior_trajectories": 3}
+    assert main(["validate", str(write(tmp_path, total_steps=400, mpc=learnt))]) == 0, capsys.readouterr().err
     with pytest.raises(ValueError, match="'value_policy' is the terminal value's kind"):
         MPCSpec(value_policy=True)
     with pytest.raises(ValueError, match="'value_policy' has one Q of one policy"):

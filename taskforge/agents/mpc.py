@@ -11,8 +11,9 @@ Reading order of one training iteration (the trainer drives it like PPO: `collec
    that ended, from `final_obs`) goes into the buffer, tagged with its episode's stage.
 2. `update`: standardisation statistics refitted on the whole buffer, then `model_updates`
    Adam steps, each member on its own bootstrap draw of `batch_size` transitions; with
-   `terminal_value`, as many TD(0) steps on the value (`value.py`) that scores plans' last states
-   (with `value_refit_every`, now and then a fresh V fitted on the whole buffer instead).
+   `terminal_value`, as many TD(0) steps on the value (`value.py`) that scores plans' last states,
+   or with `value_policy` as many TD3+BC steps on TD-MPC's `Q(s, pi(s))` (`policy_value.py`)
+   (with `value_refit_every`, now and then a fresh one fitted on the whole buffer instead).
    The motion is learnt from every transition, the reward and the value from those of the stage
    being trained (that of the latest episode started, replays of earlier stages aside). Why: a
    curriculum changes the reward, not the physics, and the rows of an earlier stage carry its
@@ -27,7 +28,8 @@ so evaluation's episode starts reset it. Termination is not modelled: every ship
 its time limit or on success, and a planned trajectory past success only adds reward.
 
 With `prior_trajectories`, a policy cloned from the warm start's demos (`prior.py`, MoDem's
-recipe) proposes that many sequences at every step: it is stepped through the model's mean for
+recipe), or with `value_policy` the value's own policy, learnt on the buffer (TD-MPC's
+policy-guided trajectories), proposes that many sequences at every step: it is stepped through the model's mean for
 `horizon` steps from the env's observation, and its actions join each planning round's
 candidates. The search then starts from the prior's own (noise-free) rollout instead of the
 previous plan (LOOP's actor-guided optimisation, Sikchi et al. 2021): a trust region of
@@ -191,11 +193,11 @@ class MPCAgent:
         search is random either way (`deterministic` is accepted for `evaluate`'s sake)."""
         obs_t = torch.as_tensor(np.atleast_2d(np.asarray(obs, dtype=np.float32)), device=self.device)
         with torch.no_grad():
-            if self.prior is not None:  # the search starts from the prior's own rollout (module doc)
-                proposals = self._proposals(obs_t)
+            proposals = None if self.prior is None else self._proposals(obs_t)
+            if proposals is not None and self.mpc.search_from_prior:  # from the prior's own rollout (module doc)
                 warm = proposals[:, 0]
             else:
-                proposals, warm = None, self._previous_plans(state, episode_start, len(obs_t))
+                warm = self._previous_plans(state, episode_start, len(obs_t))
             new = plan(self.mpc, self._scorer(obs_t), warm, self.plan_generator, proposals)
         return self._to_env(new[:, 0]), shift(new)
 

@@ -207,6 +207,13 @@ class MPCSpec(StrictModel):
     search starts from the first (noise-free) one instead of the previous plan: `init_std` is
     then the trust region around what the demos do (mpc.py's doc). 0: no prior. Needs a
     `warm_start`, or `value_policy` (whose learnt policy then proposes)."""
+    search_from_prior: bool = True
+    """With `prior_trajectories`: CEM and MPPI start each step from the first (noise-free)
+    proposal instead of the previous plan shifted by one step (LOOP's actor-guided search). Why
+    true: a prior cloned from good demos is a trust region the search must not leave (on
+    pick-place: 8 of 8 held-out goals from the prior, 0 of 8 with its proposals but the search
+    from the previous plan). false: the proposals only join the candidates, as in TD-MPC, whose
+    policy learns from the start and is poor early."""
     prior_std: float = Field(default=0.1, ge=0.0)
     """Gaussian noise on each action of the proposals after the first (which is the policy's own,
     noise-free): the search's variations around what the demos did."""
