@@ -31,13 +31,17 @@ With `prior_trajectories`, a policy cloned from the warm start's demos (`prior.p
 recipe), or with `value_policy` the value's own policy, learnt on the buffer (TD-MPC's
 policy-guided trajectories), proposes that many sequences at every step: it is stepped through the model's mean for
 `horizon` steps from the env's observation, and its actions join each planning round's
-candidates. The search then starts from the prior's own (noise-free) rollout instead of the
-previous plan (LOOP's actor-guided optimisation, Sikchi et al. 2021): a trust region of
+candidates. With `search_from_prior` (the default) the search then starts from the prior's own
+(noise-free) rollout instead of the previous plan (LOOP's actor-guided optimisation, Sikchi et
+al. 2021): a trust region of
 `init_std` around what the demos do. Why: on pick-place, a model fitted on demos alone predicts
 reward for lifting the hand whether or not it holds the object (in the demos it always does);
 a search from the previous plan found that and rose to the ceiling, 0 of 8 held-out goals, the
 prior's rollout scoring best in 4 % of the steps; started from the prior, 8 of 8 at
-`init_std` 0.1 and 5 of 8 at 0.25 (benchmarks/RESULTS.md).
+`init_std` 0.1 and 5 of 8 at 0.25 (benchmarks/RESULTS.md). A policy that learns from scratch
+is poor early, and a search restarted from it every step loses its own progress: with
+`value_policy` on push, reach was never learnt to 19k steps that way, and was from the previous
+plan (agents/mpc_policy_value.yaml sets `search_from_prior: false`, TD-MPC's arrangement).
 
 `mpc.device` puts the model, the value and the planner on a GPU; the buffer, the bootstrap
 draws and the random first actions stay on the CPU with `generator`, so the networks start
