@@ -203,9 +203,10 @@ class MPCSpec(StrictModel):
     prior_trajectories: int = Field(default=0, ge=0)
     """Candidates per planning round proposed by a policy cloned from the warm start's demos,
     each its rollout through the model for `horizon` steps (MoDem, Hansen et al. 2022; TD-MPC's
-    policy-guided trajectories; agents/prior.py). They join every round's candidates, and the
-    search starts from the first (noise-free) one instead of the previous plan: `init_std` is
-    then the trust region around what the demos do (mpc.py's doc). 0: no prior. Needs a
+    policy-guided trajectories; agents/prior.py). They join every round's candidates, and (with
+    `search_from_prior`) the search starts from the first (noise-free) one instead of the
+    previous plan: `init_std` is then the trust region around what the demos do (mpc.py's doc).
+    0: no prior. Needs a
     `warm_start`, or `value_policy` (whose learnt policy then proposes)."""
     search_from_prior: bool = True
     """With `prior_trajectories`: CEM and MPPI start each step from the first (noise-free)
