@@ -173,7 +173,10 @@ class MPCSpec(StrictModel):
     online V and 0.50 with one refitted on the final buffer (benchmarks/RESULTS.md). It can hurt
     once most episodes succeed: push seed 1's refit at 100k fell to 0.16 (one V) and 0.12 (5
     heads); with the model fixed, the value from before it planned 0.77 of 30 goals, the
-    refitted one 0.33. 0: never, V is fitted online only. Needs `terminal_value`."""
+    refitted one 0.33, and with `value_policy` the refit at 50k threw away a Q that had started to
+    push (0.34 held-out at 40k, 0.06 at 60k after it). A period longer than the run refits at the
+    first fit only, TD-MPC's arrangement (`agents/mpc_policy_value.yaml`). 0: never, V is fitted
+    online only (no fresh first fit either). Needs `terminal_value`."""
     value_ensemble: int = Field(default=1, ge=1)
     """Heads of V, each fitted by TD(0) on its own bootstrap draw of the data against its own
     target head (bootstrapped DQN, Osband et al. 2016), so they disagree where the data says
