@@ -253,6 +253,8 @@ def main() -> None:
     parser.add_argument("--value-from-updates", type=int, default=0, help="also with each of those values fitted on for this many TD(0) steps")
     parser.add_argument("--out", help="the result's name under benchmarks/results/ (default: mpc_probe_<run>[_<hidden>])")
     args = parser.parse_args()
+    if args.value_from_updates and not args.value_from:  # it fits on the values --value-from loads: without them it would do nothing
+        parser.error("--value-from-updates needs --value-from (the checkpoints whose values it fits on)")
     run = load_run(args.run)
     agent = run.agent
     if (args.value_refit or args.value_from or args.policy_value) and agent.value is None:

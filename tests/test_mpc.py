@@ -829,7 +829,7 @@ def test_the_model_probe_bins_the_whole_buffer_refits_it_and_plans_with_each_mod
     assert all(row["success_rate"] in (0.0, 1.0) for row in result["planners"]), result["planners"]
 
 
-def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_inputs(tmp_path, monkeypatch):
+def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_inputs(tmp_path, monkeypatch, capsys):
     """benchmarks/mpc_probe.py's value refits on a real pick run with a terminal value,
     warm-started from one scripted pick: the refit learns from the buffer's rewards (it values
     the demo's states, which earned the pick reward, above the untrained planner's); the one
@@ -899,6 +899,10 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
         monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--trials", "0", "--value-from", str(path)])
         with pytest.raises(SystemExit, match=error):
             mpc_probe.main()
+    monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--value-from-updates", "20"])
+    with pytest.raises(SystemExit):  # argparse's usage error, code 2, names what is missing
+        mpc_probe.main()
+    assert "--value-from-updates needs --value-from" in capsys.readouterr().err
 
     agent = load_run(checkpoint).agent
     agent.load_state_dict(load_checkpoint(saved_at)["agent"])
