@@ -900,9 +900,9 @@ def test_the_model_probe_refits_the_value_and_the_narrowed_refit_reads_only_its_
         with pytest.raises(SystemExit, match=error):
             mpc_probe.main()
     monkeypatch.setattr("sys.argv", ["mpc_probe.py", str(checkpoint.parent), "--value-from-updates", "20"])
-    with pytest.raises(SystemExit):  # argparse's usage error, code 2, names what is missing
+    with pytest.raises(SystemExit) as usage:  # argparse's usage error names what is missing
         mpc_probe.main()
-    assert "--value-from-updates needs --value-from" in capsys.readouterr().err
+    assert usage.value.code == 2 and "--value-from-updates needs --value-from" in capsys.readouterr().err
 
     agent = load_run(checkpoint).agent
     agent.load_state_dict(load_checkpoint(saved_at)["agent"])
