@@ -17,7 +17,9 @@ Variants (benchmarks/configs/, one file each) and the goals of issue 23:
   (agents/mpc_heads_refit.yaml), `mpc-push-policy-value` that with TD-MPC's value, Q(s, pi(s))
   of a policy fitted by TD3+BC, fitted afresh at its first fit only, and pi's rollouts proposed
   (agents/mpc_policy_value.yaml), `mpc-push-policy-value-refit` that with the value refitted
-  afresh every 50k as well (agents/mpc_policy_value_refit.yaml: the record of why not);
+  afresh every 50k as well (agents/mpc_policy_value_refit.yaml: the record of why not),
+  `mpc-push-policy-value-bounded` the policy value with its TD targets clipped to the rows'
+  reward range over (1 - discount) (agents/mpc_policy_value_bounded.yaml);
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py); `mpc-pick-place-native` the same in TD-MPC2's
   setting: Meta-World's own reward, no randomisation (configs/pick_place_native.yaml);
@@ -88,6 +90,7 @@ VARIANTS: dict[str, Variant] = {
     "mpc-push-heads-refit": Variant("push", "push", 200_000, 0.95),
     "mpc-push-policy-value": Variant("push", "push", 200_000, 0.95),
     "mpc-push-policy-value-refit": Variant("push", "push", 200_000, 0.95),
+    "mpc-push-policy-value-bounded": Variant("push", "push", 200_000, 0.95),
     "ppo-push": Variant("push", "push", 200_000, None),
     "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-native": Variant("pick-place", "place", 1_000_000, 0.80),

@@ -150,6 +150,33 @@ def test_the_policy_value_learns_a_policy_better_than_the_data_and_its_q():
     assert np.isfinite(metrics["value_loss"]) and {"policy_loss", "value_mean"} <= set(metrics)
 
 
+@pytest.mark.parametrize("kind", ["v", "q"])
+def test_value_bound_pulls_an_overestimating_value_back_into_the_rewards_range(kind):
+    """Rewards r = s in [0, 1] at discount 0.9: no value of them leaves [0, 10]. A value whose
+    output starts far above that (its last bias lifted, as a run-away bootstrap leaves it: V at
+    +500, Q at +50, Q moving at TD3's slower step) is fitted for a few hundred steps: with
+    `value_bound` its targets are clipped to the rows' range, so it falls to it (measured: V 6.3,
+    Q 11.3); without, each target carries the lift and it stays above (V 88, Q 26)."""
+    ends = {}
+    for bound in (False, True):
+        gen = torch.Generator().manual_seed(0)
+        s = torch.rand((2000, 1), generator=gen)
+        if kind == "v":
+            value = TerminalValue(1, [32, 32], discount=0.9, tau=0.05, generator=gen, bound=bound)
+            value.net[-1].bias.data += 50.0  # x scale 10: +500
+            value.target.load_state_dict(value.net.state_dict())
+            value.fit(s, s[:, 0], s, s.mean(0), s.std(0), torch.optim.Adam(value.net.parameters(), lr=3e-3), 400, 256, gen)
+        else:
+            value = PolicyValue(1, 1, [32, 32], discount=0.9, tau=0.05, generator=gen, bound=bound)
+            value.q[-1].bias.data += 5.0
+            value.q_target.load_state_dict(value.q.state_dict())
+            a = torch.rand((2000, 1), generator=gen) * 2 - 1
+            value.fit(s, a, s[:, 0], s, s.mean(0), s.std(0), value.optimizers(), 600, 256, gen)
+        with torch.no_grad():
+            ends[bound] = value(s).mean().item()
+    assert ends[True] < 13.0 and ends[False] > 20.0, ends
+
+
 def test_value_heads_agree_on_the_data_and_pessimism_marks_down_where_they_do_not():
     """`value_ensemble` heads, each on its own bootstrap draw against its own target head, learn
     the same discounted sum (10 s) where the data is (s in [0, 1]) and part ways off it (s = 3);
@@ -486,6 +513,8 @@ def test_the_policy_value_is_a_kind_of_terminal_value_with_one_head(tmp_path, ca
 def test_a_value_refit_needs_a_value():
     with pytest.raises(ValueError, match="'value_refit_every' .* needs 'terminal_value: true'"):
         MPCSpec(value_refit_every=1000)
+    with pytest.raises(ValueError, match="'value_bound' clips the terminal value's targets"):
+        MPCSpec(value_bound=True)
 
 
 def test_a_checkpoint_saves_each_observation_once_and_restores_the_buffer_bit_for_bit(tmp_path):

@@ -345,13 +345,13 @@ class MPCAgent:
         obs_size = self.observation_space.shape[0]
         if self.mpc.value_policy:
             self.value = PolicyValue(obs_size, self.action_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau,
-                                     self.generator, self.mpc.value_policy_alpha).to(self.device)
+                                     self.generator, self.mpc.value_policy_alpha, self.mpc.value_bound).to(self.device)
             self.value_optimizer, self.policy_optimizer = self.value.optimizers()
             if self.mpc.prior_trajectories:
                 self.prior = self.value.policy
             return
         self.value = TerminalValue(obs_size, self.mpc.hidden_sizes, self.mpc.discount, self.mpc.value_tau, self.generator,
-                                   self.mpc.value_ensemble, self.mpc.value_pessimism).to(self.device)
+                                   self.mpc.value_ensemble, self.mpc.value_pessimism, self.mpc.value_bound).to(self.device)
         self.value_optimizer = torch.optim.Adam(self.value.net.parameters(), lr=self.mpc.learning_rate)
 
     def update(self) -> dict[str, float]:

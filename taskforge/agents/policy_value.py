@@ -17,6 +17,9 @@ policy's rollouts among the candidates. Design choices:
   what the measured fit used: twin Q (the smaller one bootstraps), target-policy noise 0.2 clipped
   at 0.5, `pi` and the target networks updated every 2nd step, Polyak 0.005 (`mpc.value_tau`'s
   default), Adam at 3e-4.
+* **Targets optionally within the rewards' range** (`mpc.value_bound`; value.py's `bounded`):
+  TD3's min over two heads did not stop push seed 0's first fit from running Q to ~12x its
+  rows' worth, both heads together; the clip to `[min r, max r] / (1 - discount)` does.
 * **The planner reads the first Q head** at `pi`'s action, as TD3's actor does.
 * **Inputs standardised by the model's statistics** (refitted before each fit), outputs in units
   of 1 / (1 - discount), as V's; time limits bootstrapped, termination not modelled (mpc.py).
@@ -33,7 +36,7 @@ from torch import nn
 
 from taskforge.agents.dynamics import ensemble_mlp, run_mlp
 from taskforge.agents.prior import PolicyPrior
-from taskforge.agents.value import polyak
+from taskforge.agents.value import bounded, polyak
 
 LEARNING_RATE = 3e-4  # TD3's Adam step, for Q and pi alike
 TARGET_NOISE, NOISE_CLIP = 0.2, 0.5  # target-policy smoothing (in [-1, 1] action units)
@@ -45,9 +48,10 @@ class PolicyValue(nn.Module):
     (`policy`) to act and propose, twin Q heads and target copies of both."""
 
     def __init__(self, obs_size: int, action_size: int, hidden_sizes: list[int], discount: float, tau: float,
-                 generator: torch.Generator, alpha: float = 2.5):
+                 generator: torch.Generator, alpha: float = 2.5, bound: bool = False):
         super().__init__()
         self.discount, self.scale, self.tau, self.alpha = discount, 1.0 / (1.0 - discount), tau, alpha
+        self.bound = bound
         self.q = ensemble_mlp(2, [obs_size + action_size, *hidden_sizes], 1, generator)
         self.policy = PolicyPrior(obs_size, action_size, hidden_sizes, generator)
         self.q_target = copy.deepcopy(self.q).requires_grad_(False)
@@ -84,6 +88,7 @@ class PolicyValue(nn.Module):
                 noise = (torch.randn(batch, actions.shape[1], generator=generator).to(obs.device) * TARGET_NOISE).clamp(-NOISE_CLIP, NOISE_CLIP)
                 next_action = (self.policy_target(next_obs[idx]) + noise).clamp(-1.0, 1.0)
                 target = rewards[idx] + self.discount * self.both(next_obs[idx], next_action, target=True).min(dim=0).values
+                target = bounded(target, rewards, self.scale, self.bound)  # mpc.value_bound
             q_loss = (((self.both(obs[idx], actions[idx]) - target) / self.scale) ** 2).mean()
             q_optimizer.zero_grad()
             q_loss.backward()

@@ -17,6 +17,9 @@ TD-MPC (Hansen et al. 2022) close that gap with a value at the horizon's end. De
   the model, V ignores termination (module doc of mpc.py).
 * **Outputs in units of 1 / (1 - discount)**: a value is ~that many rewards, so the network's own
   output stays near the reward's scale and trains at the model's step size.
+* **Targets within the rewards' range** (`value_bound`, off by default): each TD target clipped
+  to `[min r, max r] / (1 - discount)` of the rows fitted (`bounded`, shared with
+  policy_value.py's Q).
 * **Heads and a lower bound** (`value_ensemble`, `value_pessimism`): `heads` Vs, each fitted on
   its own bootstrap draw against its own target head (Osband et al. 2016's bootstrapped DQN), so
   where the data says little about a state they disagree; a plan's last state is scored by the
@@ -47,15 +50,25 @@ def polyak(slow: Iterable[torch.Tensor], fast: Iterable[torch.Tensor], tau: floa
             s.lerp_(f, tau)
 
 
+def bounded(target: torch.Tensor, rewards: torch.Tensor, scale: float, bound: bool) -> torch.Tensor:
+    """A TD target clipped, with `bound` (`mpc.value_bound`), to what a value of these rewards can
+    be: `[min r, max r] * scale` (scale = 1 / (1 - discount)). Why: a bootstrap that has begun to
+    overestimate feeds its own growth; push seed 0's first Q fit ran to ~12x its rows' worth,
+    and the bound is the one thing the data says for certain about any value of it."""
+    if not bound:
+        return target
+    return target.clamp(rewards.min().item() * scale, rewards.max().item() * scale)
+
+
 class TerminalValue(nn.Module):
     """V(s) on standardised observations (statistics refitted with the model's, before each fit),
     as `heads` networks scored together by their mean minus `pessimism` x their std."""
 
     def __init__(self, obs_size: int, hidden_sizes: list[int], discount: float, tau: float, generator: torch.Generator,
-                 heads: int = 1, pessimism: float = 0.0):
+                 heads: int = 1, pessimism: float = 0.0, bound: bool = False):
         super().__init__()
         self.discount, self.tau, self.scale = discount, tau, 1.0 / (1.0 - discount)
-        self.heads, self.pessimism = heads, pessimism
+        self.heads, self.pessimism, self.bound = heads, pessimism, bound
         self.net = ensemble_mlp(heads, [obs_size, *hidden_sizes], 1, generator)
         self.target = copy.deepcopy(self.net).requires_grad_(False)
         self.register_buffer("obs_mean", torch.zeros(obs_size))
@@ -90,7 +103,7 @@ class TerminalValue(nn.Module):
         for _ in range(updates):
             idx = torch.randint(len(rewards), (self.heads, batch), generator=generator).to(obs.device)
             with torch.no_grad():
-                target = rewards[idx] + self.discount * self._own(next_obs[idx], target=True)
+                target = bounded(rewards[idx] + self.discount * self._own(next_obs[idx], target=True), rewards, self.scale, self.bound)
             loss = (((self._own(obs[idx]) - target) / self.scale) ** 2).mean()
             optimizer.zero_grad()
             loss.backward()

@@ -200,6 +200,15 @@ class MPCSpec(StrictModel):
     Why: with push seed 1's model and search fixed, every V refitted on its first 100k
     transitions planned 0.10-0.30 of 30 held-out goals, this Q 0.60 and with 5 of pi's rollouts
     proposed 0.87 (benchmarks/RESULTS.md). Needs `terminal_value`; not with `value_ensemble`."""
+    value_bound: bool = False
+    """Clip each TD target to the fitted rows' reward range over (1 - discount), `[min r, max r] /
+    (1 - discount)`: no value of this reward can leave it (termination is not modelled), and a
+    bootstrap that has started to climb cannot feed its own growth past it. Why: on push seed 0,
+    the first fresh fit of `value_policy` (40k TD3+BC steps on 1,000 random rows, worth ~18) held
+    Q in range to 20k steps and then ran it away to ~210, both Q heads together; the planner,
+    weighing that Q against ~1 of reward over its horizon, never learnt reach in 19k steps where
+    seed 1 had by 15k. Refitted offline on the same rows with the bound: Q's mean 28 at 40k (the
+    bound 8.4-50.7; benchmarks/RESULTS.md). Needs `terminal_value`."""
     value_policy_alpha: float = Field(default=2.5, gt=0.0)
     """TD3+BC's alpha: the weight of Q (scaled by its own mean size) against cloning the
     buffer's actions in pi's loss (Fujimoto & Gu 2021's 2.5). Smaller keeps pi nearer the data."""
@@ -237,6 +246,8 @@ class MPCSpec(StrictModel):
             raise ValueError(f"'value_refit_every' ({self.value_refit_every}) refits the terminal value: it needs 'terminal_value: true'")
         if (self.value_ensemble > 1 or self.value_pessimism) and not self.terminal_value:
             raise ValueError("'value_ensemble' and 'value_pessimism' shape the terminal value: they need 'terminal_value: true'")
+        if self.value_bound and not self.terminal_value:
+            raise ValueError("'value_bound' clips the terminal value's targets: it needs 'terminal_value: true'")
         if self.value_policy and not self.terminal_value:
             raise ValueError("'value_policy' is the terminal value's kind: it needs 'terminal_value: true'")
         if self.value_policy and (self.value_ensemble > 1 or self.value_pessimism):
