@@ -19,7 +19,9 @@ Variants (benchmarks/configs/, one file each) and the goals of issue 23:
   (agents/mpc_policy_value.yaml), `mpc-push-policy-value-refit` that with the value refitted
   afresh every 50k as well (agents/mpc_policy_value_refit.yaml: the record of why not),
   `mpc-push-policy-value-bounded` the policy value with its TD targets clipped to the rows'
-  reward range over (1 - discount) (agents/mpc_policy_value_bounded.yaml);
+  reward range over (1 - discount) (agents/mpc_policy_value_bounded.yaml),
+  `mpc-push-policy-value-late` that with the value's first fit at 20k env steps, plans scoring
+  rewards alone before it (agents/mpc_policy_value_late.yaml);
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py); `mpc-pick-place-native` the same in TD-MPC2's
   setting: Meta-World's own reward, no randomisation (configs/pick_place_native.yaml);
@@ -91,6 +93,7 @@ VARIANTS: dict[str, Variant] = {
     "mpc-push-policy-value": Variant("push", "push", 200_000, 0.95),
     "mpc-push-policy-value-refit": Variant("push", "push", 200_000, 0.95),
     "mpc-push-policy-value-bounded": Variant("push", "push", 200_000, 0.95),
+    "mpc-push-policy-value-late": Variant("push", "push", 200_000, 0.95),
     "ppo-push": Variant("push", "push", 200_000, None),
     "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-native": Variant("pick-place", "place", 1_000_000, 0.80),

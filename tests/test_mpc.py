@@ -3,6 +3,7 @@ and the agent trains through the curriculum (goal-observable point mass), evalua
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -483,6 +484,36 @@ def test_the_policy_value_ranks_states_proposes_its_policys_rollouts_and_resumes
     assert resumed.policy_optimizer.state_dict()["state"].keys() == agent.policy_optimizer.state_dict()["state"].keys()
     with pytest.raises(WeightsMismatch):  # `init_from` a run whose terminal value is V
         _value_agent().load_weights(torch.load(tmp_path / "agent.pt", weights_only=True))
+
+
+def test_value_start_keeps_the_value_and_its_policy_out_of_the_plans_until_its_first_fit(tmp_path):
+    """`value_start`: before that many env steps the value is not fitted (its weights stay as
+    drawn) and its pi proposes nothing (a search that would start from pi's rollout starts from
+    the previous plan); at the first update past it the value has its fresh first fit, ranks
+    states as the reward does, proposes, and a checkpoint remembers that it has started."""
+    obs, actions, distance, starts = _point_mass_walks()
+    settings = {"value_policy": True, "prior_trajectories": 2, "value_start": 2000, "value_refit_every": 100_000_000,
+                "value_refit_updates": 600, "momentum": 0.99, "iterations": 1, "population": 4, "elites": 2}
+    agent = _value_agent(**settings)
+    agent.add_demonstrations(obs, actions, -distance, starts, "reach")
+    drawn = copy.deepcopy(agent.value.state_dict())
+    metrics = agent.update()
+    assert "value_loss" not in metrics and not agent.value_started
+    assert all(torch.equal(drawn[k], v) for k, v in agent.value.state_dict().items())
+    previous = torch.full((4, agent.mpc.horizon, 2), 0.7)
+    first, _ = agent.act(obs[:4], previous)
+    np.testing.assert_allclose(first, np.full((4, 2), 0.7, np.float32), atol=0.05)  # the previous plan, not pi's
+    agent.global_step = 2000
+    metrics = agent.update()
+    assert metrics["value_refit"] == 1.0 and agent.value_started
+    assert _ranks_by_closeness(agent, obs, distance) > 0.8
+    first, _ = agent.act(obs[:4], previous)
+    np.testing.assert_allclose(first, agent.prior_act(obs[:4]), atol=0.05)  # now from pi's own rollout
+    resumed = _value_agent(**settings)
+    resumed.load_state_dict(agent.state_dict())
+    assert resumed.value_started
+    with pytest.raises(ValueError, match="'value_start' \\(2000\\) delays the terminal value"):
+        MPCSpec(value_start=2000)
 
 
 @pytest.mark.parametrize("from_prior", [True, False])

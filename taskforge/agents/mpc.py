@@ -13,7 +13,8 @@ Reading order of one training iteration (the trainer drives it like PPO: `collec
    Adam steps, each member on its own bootstrap draw of `batch_size` transitions; with
    `terminal_value`, as many TD(0) steps on the value (`value.py`) that scores plans' last states,
    or with `value_policy` as many TD3+BC steps on TD-MPC's `Q(s, pi(s))` (`policy_value.py`)
-   (with `value_refit_every`, now and then a fresh one fitted on the whole buffer instead).
+   (with `value_refit_every`, now and then a fresh one fitted on the whole buffer instead;
+   with `value_start`, none before that many env steps, and plans score rewards alone till then).
    The motion is learnt from every transition, the reward and the value from those of the stage
    being trained (that of the latest episode started, replays of earlier stages aside). Why: a
    curriculum changes the reward, not the physics, and the rows of an earlier stage carry its
@@ -168,6 +169,8 @@ class MPCAgent:
         self.buffer = TransitionBuffer(self.mpc.buffer_size, obs_size, self.action_size)
         self.value: TerminalValue | PolicyValue | None = None
         self.value_refits = 0  # fresh refits of the value so far (`mpc.value_refit_every`)
+        # has the value had its first fit (`mpc.value_start`)? Until then plans score rewards alone
+        self.value_started = self.mpc.value_start == 0
         self.prior: PolicyPrior | None = None
         if self.mpc.terminal_value:
             self._new_value()  # with `value_policy` and proposals, its policy is the prior
@@ -197,7 +200,9 @@ class MPCAgent:
         search is random either way (`deterministic` is accepted for `evaluate`'s sake)."""
         obs_t = torch.as_tensor(np.atleast_2d(np.asarray(obs, dtype=np.float32)), device=self.device)
         with torch.no_grad():
-            proposals = None if self.prior is None else self._proposals(obs_t)
+            # a value's pi proposes once it is fitted (`mpc.value_start`); a demos' prior from the start
+            proposing = self.prior is not None and (self.value_started or not self.mpc.value_policy)
+            proposals = self._proposals(obs_t) if proposing else None
             if proposals is not None and self.mpc.search_from_prior:  # from the prior's own rollout (module doc)
                 warm = proposals[:, 0]
             else:
@@ -261,7 +266,7 @@ class MPCAgent:
             for t in range(horizon):
                 state, reward = self.model.sample(state, actions[None, :, t].expand(members, -1, -1), self.plan_generator)
                 total += self.mpc.discount**t * reward
-            if self.value is not None:
+            if self.value is not None and self.value_started:
                 total += self.mpc.discount**horizon * self.value(state)
             returns = total.reshape(members, envs, n, per_member).permute(1, 2, 0, 3).reshape(envs, n, members * per_member)
             if self.mpc.optimism:  # optimism in the face of the members' disagreement (MPCSpec.optimism)
@@ -392,7 +397,8 @@ class MPCAgent:
         metrics = {"model_nll": total / mpc.model_updates, "model_obs_mse": obs_error.mean().item(),
                    "model_reward_mse": reward_error.mean().item(), "buffer_size": float(self.buffer.size),
                    "reward_rows": float(len(rows))}
-        if self.value is not None:  # obs and rewards are on the device already, in the fit's data
+        if self.value is not None and self.global_step >= mpc.value_start:  # on the device already, in the fit's data
+            self.value_started = True
             stage = slice(None) if every_row else rows  # a slice copies nothing
             landed = self.buffer.next_obs[: self.buffer.size].to(self.device)[stage]
             updates = mpc.model_updates
@@ -452,7 +458,7 @@ class MPCAgent:
                  "buffer": self.buffer.state_dict(), "generator": self.generator.get_state(), "seed": self.seed,
                  "global_step": self.global_step, "num_updates": self.num_updates, "env_resets": self._env_resets,
                  "data_given": self.data_given, "stage_names": list(self.stage_names), "stage": self.stage,
-                 "value_refits": self.value_refits}
+                 "value_refits": self.value_refits, "value_started": self.value_started}
         if self.plan_generator is not self.generator:
             state |= {"plan_generator": self.plan_generator.get_state(), "plan_device": self.device.type}
         if self.value is not None:
@@ -513,4 +519,5 @@ class MPCAgent:
         # checkpoints from before the stage tags: every row untagged, no stage named
         self.stage_names, self.stage = list(state.get("stage_names", [])), state.get("stage")
         self.value_refits = state.get("value_refits", 0)  # from before the refits: none done
+        self.value_started = state.get("value_started", True)  # from before `value_start`: live from the first fit
         self._obs = None  # the envs are not the agent's: the next collect() resets them
