@@ -17,7 +17,7 @@ policy's rollouts among the candidates. Design choices:
   what the measured fit used: twin Q (the smaller one bootstraps), target-policy noise 0.2 clipped
   at 0.5, `pi` and the target networks updated every 2nd step, Polyak 0.005 (`mpc.value_tau`'s
   default), Adam at 3e-4.
-* **Targets optionally within the rewards' range** (`mpc.value_bound`; value.py's `bounded`):
+* **Targets optionally within the rewards' range** (`mpc.value_bound`; value.py's `target_range`):
   TD3's min over two heads did not stop push seed 0's first fit from running Q to ~12x its
   rows' worth, both heads together; the clip to `[min r, max r] / (1 - discount)` does.
 * **The planner reads the first Q head** at `pi`'s action, as TD3's actor does.
@@ -36,7 +36,7 @@ from torch import nn
 
 from taskforge.agents.dynamics import ensemble_mlp, run_mlp
 from taskforge.agents.prior import PolicyPrior
-from taskforge.agents.value import bounded, polyak
+from taskforge.agents.value import polyak, target_range
 
 LEARNING_RATE = 3e-4  # TD3's Adam step, for Q and pi alike
 TARGET_NOISE, NOISE_CLIP = 0.2, 0.5  # target-policy smoothing (in [-1, 1] action units)
@@ -82,13 +82,14 @@ class PolicyValue(nn.Module):
         self.policy_target.obs_std.copy_(std)
         q_optimizer, policy_optimizer = optimizers
         total, metrics = 0.0, {}
+        low, high = target_range(rewards, self.scale, self.bound)  # mpc.value_bound; without it (-inf, inf)
         for step in range(updates):
             idx = torch.randint(len(rewards), (batch,), generator=generator).to(obs.device)
             with torch.no_grad():  # TD3's target: the target policy's action, smoothed, at the smaller target Q
                 noise = (torch.randn(batch, actions.shape[1], generator=generator).to(obs.device) * TARGET_NOISE).clamp(-NOISE_CLIP, NOISE_CLIP)
                 next_action = (self.policy_target(next_obs[idx]) + noise).clamp(-1.0, 1.0)
                 target = rewards[idx] + self.discount * self.both(next_obs[idx], next_action, target=True).min(dim=0).values
-                target = bounded(target, rewards, self.scale, self.bound)  # mpc.value_bound
+                target = target.clamp(low, high)
             q_loss = (((self.both(obs[idx], actions[idx]) - target) / self.scale) ** 2).mean()
             q_optimizer.zero_grad()
             q_loss.backward()

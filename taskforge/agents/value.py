@@ -18,7 +18,7 @@ TD-MPC (Hansen et al. 2022) close that gap with a value at the horizon's end. De
 * **Outputs in units of 1 / (1 - discount)**: a value is ~that many rewards, so the network's own
   output stays near the reward's scale and trains at the model's step size.
 * **Targets within the rewards' range** (`value_bound`, off by default): each TD target clipped
-  to `[min r, max r] / (1 - discount)` of the rows fitted (`bounded`, shared with
+  to `[min r, max r] / (1 - discount)` of the rows fitted (`target_range`, shared with
   policy_value.py's Q).
 * **Heads and a lower bound** (`value_ensemble`, `value_pessimism`): `heads` Vs, each fitted on
   its own bootstrap draw against its own target head (Osband et al. 2016's bootstrapped DQN), so
@@ -34,6 +34,7 @@ TD-MPC (Hansen et al. 2022) close that gap with a value at the horizon's end. De
 from __future__ import annotations
 
 import copy
+import math
 from collections.abc import Iterable
 
 import torch
@@ -50,14 +51,15 @@ def polyak(slow: Iterable[torch.Tensor], fast: Iterable[torch.Tensor], tau: floa
             s.lerp_(f, tau)
 
 
-def bounded(target: torch.Tensor, rewards: torch.Tensor, scale: float, bound: bool) -> torch.Tensor:
-    """A TD target clipped, with `bound` (`mpc.value_bound`), to what a value of these rewards can
-    be: `[min r, max r] * scale` (scale = 1 / (1 - discount)). Why: a bootstrap that has begun to
+def target_range(rewards: torch.Tensor, scale: float, bound: bool) -> tuple[float, float]:
+    """What a value of these rewards can be, `[min r, max r] * scale` (scale = 1 / (1 - discount)),
+    as the TD targets' clamp with `bound` (`mpc.value_bound`); without, (-inf, inf): no clamp.
+    Read once per fit (the rows do not change within it). Why: a bootstrap that has begun to
     overestimate feeds its own growth; push seed 0's first Q fit ran to ~12x its rows' worth,
     and the bound is the one thing the data says for certain about any value of it."""
     if not bound:
-        return target
-    return target.clamp(rewards.min().item() * scale, rewards.max().item() * scale)
+        return -math.inf, math.inf
+    return rewards.min().item() * scale, rewards.max().item() * scale
 
 
 class TerminalValue(nn.Module):
@@ -99,11 +101,11 @@ class TerminalValue(nn.Module):
         value and (with heads) the heads' mean spread, as metrics."""
         self.obs_mean.copy_(mean)
         self.obs_std.copy_(std)
-        total = 0.0
+        total, (low, high) = 0.0, target_range(rewards, self.scale, self.bound)
         for _ in range(updates):
             idx = torch.randint(len(rewards), (self.heads, batch), generator=generator).to(obs.device)
             with torch.no_grad():
-                target = bounded(rewards[idx] + self.discount * self._own(next_obs[idx], target=True), rewards, self.scale, self.bound)
+                target = (rewards[idx] + self.discount * self._own(next_obs[idx], target=True)).clamp(low, high)
             loss = (((self._own(obs[idx]) - target) / self.scale) ** 2).mean()
             optimizer.zero_grad()
             loss.backward()
