@@ -400,6 +400,33 @@ def test_the_terminal_value_learns_from_the_stage_being_trained_alone():
     assert _ranks_by_closeness(agent, obs, distance) > 0.8
 
 
+def test_value_relabel_fits_the_earlier_stages_rows_with_the_reward_networks_reward_for_this_one():
+    """`value_relabel`: the value also fits the earlier stage's rows, their reward the model's
+    reward network's for the stage being trained, not the reward they were stored with. The same
+    random walks are in the buffer as reach's (minus the distance) and as an earlier stage's (plus
+    the distance): relabelled, those rows say what reach's do and the value still ranks states by
+    closeness (fitted on every row as stored, the two rewards cancel: 0.30, the test above); the
+    stage's own rows keep their stored reward bit for bit."""
+    obs, actions, distance, starts = _point_mass_walks()
+    agent = _value_agent(value_relabel=True)
+    agent.add_demonstrations(obs, actions, -distance, starts, "reach")  # the stage trained
+    agent.add_demonstrations(obs, actions, distance, starts, "away")
+    metrics = agent.update()
+    assert metrics["value_relabelled_rows"] == metrics["buffer_size"] - metrics["reward_rows"] == metrics["reward_rows"]
+    assert _ranks_by_closeness(agent, obs, distance) > 0.8
+    inputs, targets = agent.buffer.inputs_and_targets()
+    rows = agent.buffer.rows_of(agent.stage)
+    relabelled = agent._stage_rewards(inputs, targets[:, -1], rows)
+    assert torch.equal(relabelled[rows], targets[rows, -1])
+    away = agent.buffer.rows_of(agent._tag("away"))
+    assert torch.corrcoef(torch.stack([relabelled[away], -targets[away, -1]]))[0, 1] > 0.9  # reach's reward there
+    single = _value_agent(value_relabel=True)  # one stage: nothing to relabel
+    single.add_demonstrations(obs, actions, -distance, starts, "reach")
+    assert "value_relabelled_rows" not in single.update()
+    with pytest.raises(ValueError, match="'value_relabel' widens the terminal value's rows"):
+        MPCSpec(value_relabel=True)
+
+
 def test_a_fresh_refit_of_the_value_forgets_what_it_learnt_before(tmp_path):
     """`value_refit_every`: a V that learnt the opposite of the reward (the primacy bias in its
     sharpest form: it paid for the distance, the stage pays for closeness) is not undone by the

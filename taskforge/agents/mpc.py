@@ -20,7 +20,9 @@ Reading order of one training iteration (the trainer drives it like PPO: `collec
    curriculum changes the reward, not the physics, and the rows of an earlier stage carry its
    reward on the same states. Measured on Meta-World push after reach (~16k steps): fitted on
    every row, the reward's squared error rose 40x at the promotion and stayed there (~0.013),
-   where the push stage alone fits it to ~0.0001.
+   where the push stage alone fits it to ~0.0001. With `value_relabel` the value reads every
+   row, the earlier stages' with the reward the model's reward network gives them for this
+   stage (a first fit soon after a promotion otherwise has only the few rows since).
 
 Why the agent has the same surface as `PPOAgent` (`collect`, `update`, `act`, `state_dict`):
 the curriculum, checkpoints, `--resume`, the progress bar and `taskforge eval` then work
@@ -72,6 +74,7 @@ from taskforge.spec.agent import AgentSpec
 
 OnStep = Callable[[np.ndarray, np.ndarray, np.ndarray, dict], None]
 UNTAGGED = -1  # a transition whose stage is not known (`TransitionBuffer`)
+RELABEL_CHUNK = 16_384  # rows per forward pass when relabelling rewards (`MPCAgent._stage_rewards`)
 
 
 def _stage_of(info: dict, i: int) -> str | None:
@@ -400,6 +403,10 @@ class MPCAgent:
         if self.value is not None and self.global_step >= mpc.value_start:  # on the device already, in the fit's data
             self.value_started = True
             stage = slice(None) if every_row else rows  # a slice copies nothing
+            rewards = targets[stage, obs_size]
+            if mpc.value_relabel and not every_row:  # every row, the earlier stages' with this one's reward
+                stage, rewards = slice(None), self._stage_rewards(inputs, targets[:, obs_size], rows)
+                metrics["value_relabelled_rows"] = float(self.buffer.size - len(rows))
             landed = self.buffer.next_obs[: self.buffer.size].to(self.device)[stage]
             updates = mpc.model_updates
             # Fresh refit (`mpc.value_refit_every`; Nikishin et al. 2022's reset against the primacy
@@ -410,7 +417,7 @@ class MPCAgent:
                 self.value_refits = self.global_step // mpc.value_refit_every + 1
                 updates = mpc.value_refit_updates
                 metrics["value_refit"] = 1.0
-            obs, rewards, mean, std = inputs[stage, :obs_size], targets[stage, obs_size], model.in_mean[:obs_size], model.in_std[:obs_size]
+            obs, mean, std = inputs[stage, :obs_size], model.in_mean[:obs_size], model.in_std[:obs_size]
             if isinstance(self.value, PolicyValue):  # Q and pi also read the actions taken, in the planner's units
                 optimizers = (self.value_optimizer, self.policy_optimizer)
                 metrics |= self.value.fit(obs, self.to_unit(inputs[stage, obs_size:]), rewards, landed, mean, std, optimizers,
@@ -419,6 +426,20 @@ class MPCAgent:
                 assert self.value is not None
                 metrics |= self.value.fit(obs, rewards, landed, mean, std, self.value_optimizer, updates, batch, self.generator)
         return metrics
+
+    def _stage_rewards(self, inputs: torch.Tensor, stored: torch.Tensor, rows: torch.Tensor) -> torch.Tensor:
+        """Every filled row's reward as the stage being trained's (`mpc.value_relabel`): `stored`
+        on its own `rows`, elsewhere what the model's reward network (its members' mean, fitted on
+        those rows just before) predicts for the row's observation and action. In chunks, so a
+        large buffer does not hold every member's activations at once."""
+        obs_size, members = self.observation_space.shape[0], self.mpc.ensemble_size
+        rewards = torch.empty_like(stored)
+        with torch.no_grad():
+            for chunk in torch.split(torch.arange(len(stored), device=stored.device), RELABEL_CHUNK):
+                x = inputs[chunk][None].expand(members, -1, -1)
+                rewards[chunk] = self.model.mean_prediction(x[..., :obs_size], x[..., obs_size:])[1].mean(dim=0)
+        rewards[rows] = stored[rows]
+        return rewards
 
     def add_demonstrations(self, observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
                            episode_starts: np.ndarray, stage: str) -> int:

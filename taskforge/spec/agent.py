@@ -218,6 +218,16 @@ class MPCSpec(StrictModel):
     rewards alone reached 1.00; fitted afresh on the first 20,000 rows, Q's correlation was 0.94
     and the planner reached 0.90 (benchmarks/RESULTS.md). A value's first rows should cover where
     the planner goes. 0: from the first fit."""
+    value_relabel: bool = False
+    """After a promotion, the value also fits the earlier stages' rows, each with the reward the
+    model's reward network (its members' mean) predicts there for the stage being trained; the
+    stage's own rows keep their stored reward. Why: the value fits the stage being trained's rows
+    (their stored reward is that stage's), so a first fit soon after a promotion sees few rows
+    (push seed 0: 4,400 at 20k, its 15,600 reach rows left out), and a Q converged on them pulled
+    the hand off the puck; the reach rows cover the approach to it. Fitted offline on push seed
+    0's first 20,000 rows so relabelled, Q's correlation with the reward on the planner's rows
+    35k-40k was 0.64-0.77 (the push rows alone: 0.46-0.54) and the planner pushed 0.20-0.30 of
+    10 held-out goals (push rows alone 0.00-0.10; benchmarks/RESULTS.md). Needs `terminal_value`."""
     value_policy_alpha: float = Field(default=2.5, gt=0.0)
     """TD3+BC's alpha: the weight of Q (scaled by its own mean size) against cloning the
     buffer's actions in pi's loss (Fujimoto & Gu 2021's 2.5). Smaller keeps pi nearer the data."""
@@ -259,6 +269,8 @@ class MPCSpec(StrictModel):
             raise ValueError(f"'value_start' ({self.value_start}) delays the terminal value: it needs 'terminal_value: true'")
         if self.value_bound and not self.terminal_value:
             raise ValueError("'value_bound' clips the terminal value's targets: it needs 'terminal_value: true'")
+        if self.value_relabel and not self.terminal_value:
+            raise ValueError("'value_relabel' widens the terminal value's rows: it needs 'terminal_value: true'")
         if self.value_policy and not self.terminal_value:
             raise ValueError("'value_policy' is the terminal value's kind: it needs 'terminal_value: true'")
         if self.value_policy and (self.value_ensemble > 1 or self.value_pessimism):
