@@ -433,12 +433,13 @@ class MPCAgent:
         those rows just before) predicts for the row's observation and action. In chunks, so a
         large buffer does not hold every member's activations at once."""
         obs_size, members = self.observation_space.shape[0], self.mpc.ensemble_size
-        rewards = torch.empty_like(stored)
+        rewards = stored.clone()
+        others = torch.ones(len(stored), dtype=torch.bool, device=stored.device)
+        others[rows] = False
         with torch.no_grad():
-            for chunk in torch.split(torch.arange(len(stored), device=stored.device), RELABEL_CHUNK):
+            for chunk in torch.split(torch.nonzero(others).flatten(), RELABEL_CHUNK):
                 x = inputs[chunk][None].expand(members, -1, -1)
                 rewards[chunk] = self.model.mean_prediction(x[..., :obs_size], x[..., obs_size:])[1].mean(dim=0)
-        rewards[rows] = stored[rows]
         return rewards
 
     def add_demonstrations(self, observations: np.ndarray, actions: np.ndarray, rewards: np.ndarray,
