@@ -400,6 +400,23 @@ def test_the_terminal_value_learns_from_the_stage_being_trained_alone():
     assert _ranks_by_closeness(agent, obs, distance) > 0.8
 
 
+def test_value_updates_sets_the_values_steps_apart_from_the_models():
+    """`value_updates`: the value takes its own number of steps per fit (TD-MPC2's one per env
+    step), the model keeps `model_updates`; with too few the value has not learnt to rank the
+    states by closeness yet, with the value's own count it has."""
+    obs, actions, distance, starts = _point_mass_walks()
+    few, many = _value_agent(model_updates=20), _value_agent(model_updates=20, value_updates=400)
+    for agent in (few, many):
+        agent.add_demonstrations(obs, actions, -distance, starts, "reach")
+        agent.update()
+    steps = [next(iter(a.value_optimizer.state.values()))["step"].item() for a in (few, many)]
+    assert steps == [20, 400]
+    assert next(iter(many.optimizer.state.values()))["step"].item() == 20  # the model's own
+    assert _ranks_by_closeness(many, obs, distance) > 0.8 > _ranks_by_closeness(few, obs, distance)
+    with pytest.raises(ValueError, match="'value_updates' .* fits the terminal value"):
+        MPCSpec(value_updates=5)
+
+
 def test_value_relabel_fits_the_earlier_stages_rows_with_the_reward_networks_reward_for_this_one():
     """`value_relabel`: the value also fits the earlier stage's rows, their reward the model's
     reward network's for the stage being trained, not the reward they were stored with. The same

@@ -408,7 +408,7 @@ class MPCAgent:
                 stage, rewards = slice(None), self._stage_rewards(inputs, targets[:, obs_size], rows)
                 metrics["value_relabelled_rows"] = float(self.buffer.size - len(rows))
             landed = self.buffer.next_obs[: self.buffer.size].to(self.device)[stage]
-            updates = mpc.model_updates
+            updates = mpc.value_updates or mpc.model_updates  # `mpc.value_updates`: TD-MPC2's one step per env step
             # Fresh refit (`mpc.value_refit_every`; Nikishin et al. 2022's reset against the primacy
             # bias): at the first fit and at each multiple of the period passed, V starts from new
             # weights and fits the whole stage's data at once; the fits between go on from it.

@@ -123,6 +123,14 @@ class MPCSpec(StrictModel):
     batch_size: int = Field(default=256, ge=1)
     model_updates: int = Field(default=200, ge=1)
     """Gradient steps on the model after each collection of `steps_per_update` env steps."""
+    value_updates: int | None = Field(default=None, ge=1)
+    """Gradient steps on the terminal value (V, or Q and pi) after each collection; None: as
+    many as `model_updates`. Why apart from the model's: TD-MPC2 takes one value step per env
+    step (an update-to-data ratio of 1), 5x the model's 200 per 1,000 here, and a value fitted
+    that much less may trail its data: push seed 0's 200k policy value (0.74 held-out) fitted on
+    for 20k more steps on its own buffer, nothing else changed, planned 0.88 (60k more: 0.72;
+    benchmarks/RESULTS.md).
+    Needs `terminal_value`."""
     steps_per_update: int = Field(default=1000, ge=1)
     """Env steps (all envs together) between model fits."""
     random_steps: int = Field(default=2000, ge=0)
@@ -271,6 +279,8 @@ class MPCSpec(StrictModel):
             raise ValueError("'value_bound' clips the terminal value's targets: it needs 'terminal_value: true'")
         if self.value_relabel and not self.terminal_value:
             raise ValueError("'value_relabel' widens the terminal value's rows: it needs 'terminal_value: true'")
+        if self.value_updates and not self.terminal_value:
+            raise ValueError(f"'value_updates' ({self.value_updates}) fits the terminal value: it needs 'terminal_value: true'")
         if self.value_policy and not self.terminal_value:
             raise ValueError("'value_policy' is the terminal value's kind: it needs 'terminal_value: true'")
         if self.value_policy and (self.value_ensemble > 1 or self.value_pessimism):
