@@ -130,7 +130,7 @@ class MPCSpec(StrictModel):
     that much less may trail its data: push seed 0's 200k policy value (0.74 held-out) fitted on
     for 20k more steps on its own buffer, nothing else changed, planned 0.88 (60k more: 0.72);
     live on that seed, one step per env step (agents/mpc_policy_value_utd.yaml) planned 0.68 at
-    60k and 0.90 at 120k (benchmarks/RESULTS.md). Needs `terminal_value`."""
+    60k, 0.90 at 120k and 0.92 at 200k (benchmarks/RESULTS.md). Needs `terminal_value`."""
     steps_per_update: int = Field(default=1000, ge=1)
     """Env steps (all envs together) between model fits."""
     random_steps: int = Field(default=2000, ge=0)
