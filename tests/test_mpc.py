@@ -210,8 +210,10 @@ def test_the_probe_takes_one_head_of_several_as_a_value_of_its_own():
 
 
 def test_value_heads_need_a_value_and_pessimism_needs_two_heads():
-    with pytest.raises(ValueError, match="'value_ensemble' and 'value_pessimism' .* need 'terminal_value: true'"):
+    with pytest.raises(ValueError, match="'value_ensemble' \\(5\\) gives the terminal value heads: it needs 'terminal_value: true'"):
         MPCSpec(value_ensemble=5)
+    with pytest.raises(ValueError, match="'value_pessimism' \\(1.0\\) weighs the terminal value's heads: it needs 'terminal_value: true'"):
+        MPCSpec(value_pessimism=1.0)
     with pytest.raises(ValueError, match="'value_pessimism' .* needs 'value_ensemble' >= 2"):
         MPCSpec(terminal_value=True, discount=0.99, value_pessimism=1.0)
 

@@ -101,6 +101,20 @@ class RL2Spec(StrictModel):
     per its paper, an unbounded reward in the recurrent state makes RL² collapse."""
 
 
+# The fields that act on the terminal value, and how: each set away from its default means
+# nothing without one (`MPCSpec._consistent` names the field and this in its error).
+_SHAPES_THE_VALUE: dict[str, str] = {
+    "value_refit_every": "refits the terminal value",
+    "value_ensemble": "gives the terminal value heads",
+    "value_pessimism": "weighs the terminal value's heads",
+    "value_start": "delays the terminal value",
+    "value_bound": "clips the terminal value's targets",
+    "value_relabel": "widens the terminal value's rows",
+    "value_updates": "fits the terminal value",
+    "value_policy": "is the terminal value's kind",
+}
+
+
 class MPCSpec(StrictModel):
     """`algo: mpc`: a learned dynamics model and model-predictive control (PETS, Chua et al.
     2018). An ensemble of probabilistic networks predicts the next observation and the stage
@@ -269,20 +283,10 @@ class MPCSpec(StrictModel):
     def _consistent(self) -> MPCSpec:
         if self.terminal_value and self.discount >= 1.0:
             raise ValueError("'terminal_value' needs 'discount' < 1 (e.g. 0.99): a value sums the rewards it discounts")
-        if self.value_refit_every and not self.terminal_value:
-            raise ValueError(f"'value_refit_every' ({self.value_refit_every}) refits the terminal value: it needs 'terminal_value: true'")
-        if (self.value_ensemble > 1 or self.value_pessimism) and not self.terminal_value:
-            raise ValueError("'value_ensemble' and 'value_pessimism' shape the terminal value: they need 'terminal_value: true'")
-        if self.value_start and not self.terminal_value:
-            raise ValueError(f"'value_start' ({self.value_start}) delays the terminal value: it needs 'terminal_value: true'")
-        if self.value_bound and not self.terminal_value:
-            raise ValueError("'value_bound' clips the terminal value's targets: it needs 'terminal_value: true'")
-        if self.value_relabel and not self.terminal_value:
-            raise ValueError("'value_relabel' widens the terminal value's rows: it needs 'terminal_value: true'")
-        if self.value_updates and not self.terminal_value:
-            raise ValueError(f"'value_updates' ({self.value_updates}) fits the terminal value: it needs 'terminal_value: true'")
-        if self.value_policy and not self.terminal_value:
-            raise ValueError("'value_policy' is the terminal value's kind: it needs 'terminal_value: true'")
+        for field, shapes in _SHAPES_THE_VALUE.items():
+            value = getattr(self, field)
+            if value != type(self).model_fields[field].default and not self.terminal_value:
+                raise ValueError(f"'{field}' ({value}) {shapes}: it needs 'terminal_value: true'")
         if self.value_policy and (self.value_ensemble > 1 or self.value_pessimism):
             raise ValueError(f"'value_policy' has one Q of one policy: expected 'value_ensemble' 1 and 'value_pessimism' 0 "
                              f"(got {self.value_ensemble} and {self.value_pessimism:g})")
