@@ -442,7 +442,7 @@ def test_value_relabel_fits_the_earlier_stages_rows_with_the_reward_networks_rew
     single = _value_agent(value_relabel=True)  # one stage: nothing to relabel
     single.add_demonstrations(obs, actions, -distance, starts, "reach")
     assert "value_relabelled_rows" not in single.update()
-    with pytest.raises(ValueError, match="'value_relabel' widens the terminal value's rows"):
+    with pytest.raises(ValueError, match="'value_relabel' \\(True\\) widens the terminal value's rows"):
         MPCSpec(value_relabel=True)
 
 
@@ -581,7 +581,7 @@ def test_the_policy_value_is_a_kind_of_terminal_value_with_one_head(tmp_path, ca
     start there, and still refuses it without `value_policy` (test above)."""
     learnt = {"terminal_value": True, "discount": 0.95, "value_policy": True, "prior_trajectories": 3}
     assert main(["validate", str(write(tmp_path, total_steps=400, mpc=learnt))]) == 0, capsys.readouterr().err
-    with pytest.raises(ValueError, match="'value_policy' is the terminal value's kind"):
+    with pytest.raises(ValueError, match="'value_policy' \\(True\\) is the terminal value's kind"):
         MPCSpec(value_policy=True)
     with pytest.raises(ValueError, match="'value_policy' has one Q of one policy"):
         MPCSpec(value_policy=True, terminal_value=True, discount=0.9, value_ensemble=3)
@@ -590,7 +590,7 @@ def test_the_policy_value_is_a_kind_of_terminal_value_with_one_head(tmp_path, ca
 def test_a_value_refit_needs_a_value():
     with pytest.raises(ValueError, match="'value_refit_every' .* needs 'terminal_value: true'"):
         MPCSpec(value_refit_every=1000)
-    with pytest.raises(ValueError, match="'value_bound' clips the terminal value's targets"):
+    with pytest.raises(ValueError, match="'value_bound' \\(True\\) clips the terminal value's targets"):
         MPCSpec(value_bound=True)
 
 
