@@ -128,7 +128,8 @@ def curriculum_summary(cur: ResolvedCurriculum) -> list[str]:
         source = str(cur.demos_file) if ws.demos else f"{ws.generate_episodes} scripted episodes of {tasks}"
         if cur.agent.algo == "mpc":  # the demos are the model's first data (and, with a prior, a cloned policy)
             prior = cur.agent.planning.prior_trajectories
-            cloned = f"; a policy cloned from them ({ws.bc_epochs} epochs) proposes {prior} of each planning round's candidates and the search starts from it" if prior else ""
+            start = " and the search starts from it" if cur.agent.planning.search_from_prior else ""
+            cloned = f"; a policy cloned from them ({ws.bc_epochs} epochs) proposes {prior} of each planning round's candidates{start}" if prior else ""
             if prior and cur.agent.planning.value_policy:
                 cloned += " (the terminal value's policy, fitted on by TD3+BC from then on)"
             lines.append(f"  warm start from {source}: they seed the dynamics model's data, fitted on them before the first plan{cloned}")

@@ -773,6 +773,20 @@ def test_validate_describes_the_mpc_warm_start_as_the_models_data(capsys, monkey
     assert "seed the dynamics model's data" in line and "BC" not in line
 
 
+@pytest.mark.parametrize(("config", "starts_from_prior"), [
+    ("benchmarks/configs/mpc_pick_place_demos_prior.yaml", True),  # agents/mpc_demos.yaml: search_from_prior
+    ("benchmarks/configs/mpc_push_policy_value_long_demos.yaml", False),  # the value's pi only proposes
+])
+def test_validate_says_whether_the_search_starts_from_the_proposing_policy(capsys, monkeypatch, config, starts_from_prior):
+    """The warm start's summary line says the search starts from the cloned policy only where the
+    preset's `search_from_prior` makes it so: a preset that only adds the policy's rollouts to the
+    candidates (TD-MPC's arrangement) must not read as LOOP's trust region."""
+    monkeypatch.chdir(ROOT)
+    assert main(["validate", config]) == 0
+    [line] = [x for x in capsys.readouterr().out.splitlines() if "warm start from" in x]
+    assert "proposes" in line and ("the search starts from it" in line) == starts_from_prior, line
+
+
 
 def test_a_proposal_the_model_scores_best_becomes_the_plan():
     """Whatever the search draws, a proposal with the best return is kept: random shooting's
