@@ -13,7 +13,7 @@ import yaml
 from gymnasium.spaces import Box
 
 import benchmarks.common
-from benchmarks import model_based, mpc_data_probe, mpc_prior_probe, mpc_probe
+from benchmarks import model_based, mpc_data_probe, mpc_prior_probe, mpc_probe, mpc_push_probe
 from taskforge.agents import MPCAgent, make_vector_env
 from taskforge.agents.dynamics import DynamicsEnsemble
 from taskforge.agents.mpc import TransitionBuffer
@@ -899,6 +899,32 @@ def test_the_data_probe_counts_the_demos_pushes_toward_the_goal_and_reads_the_bu
     monkeypatch.setattr("sys.argv", ["mpc_data_probe.py", str(tmp_path / "point/final.pt")])
     with pytest.raises(SystemExit, match="observation.relative_positions: true"):
         mpc_data_probe.main()
+
+
+def test_the_push_probe_scores_meta_worlds_scripted_pushes_with_the_runs_own_model(tmp_path, monkeypatch):
+    """benchmarks/mpc_push_probe.py on a real push run warm-started from scripted pushes: it
+    compares the model on exactly the scripted steps that moved the puck (counted here from the
+    simulator, independently), finds hand-at-puck states before a goalward push and has the run's
+    scorer pick one of three sequences at each; a task without `goal - object` is a one-line error."""
+    (tmp_path / "push").mkdir()
+    checkpoint, _ = demos_run(tmp_path / "push", "tasks/metaworld/push.yaml", "push", episodes=2, planned_steps=400)
+    monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
+    monkeypatch.setattr("sys.argv", ["mpc_push_probe.py", str(checkpoint), "--episodes", "1", "--repeats", "1", "--out", "push"])
+    mpc_push_probe.main()
+    (result,) = json.loads((tmp_path / "results/push.json").read_text())["runs"]
+
+    (episode,) = mpc_push_probe.scripted_episodes(str(ROOT / "tasks/metaworld/push.yaml"), "push", 1)
+    moved = int((np.linalg.norm(episode.next_obs[:, 4:7] - episode.obs[:, 4:7], axis=1) > 0.005).sum())
+    assert result["motion"]["steps"] == moved >= 10, (result, moved)  # a scripted push moves the puck
+    assert -1.0 <= result["motion"]["cosine_median"] <= 1.0 and result["motion"]["length_ratio_median"] >= 0.0
+    planner = result["planner"]
+    assert planner["states"] >= 1 and planner["best_push"] + planner["best_hold"] + planner["best_own_plan"] == planner["states"], planner
+
+    point = write(tmp_path, total_steps=400)  # the point-mass task: no object, no `goal - object`
+    train(point, run_dir=tmp_path / "point", progress=False)
+    monkeypatch.setattr("sys.argv", ["mpc_push_probe.py", str(tmp_path / "point/final.pt")])
+    with pytest.raises(SystemExit, match="observation.relative_positions: true"):
+        mpc_push_probe.main()
 
 
 def test_the_data_probe_counts_the_steps_a_scripted_pick_lifts_the_puck(tmp_path, monkeypatch):
