@@ -38,20 +38,32 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
 from taskforge.agents import MPCAgent  # noqa: E402
-from taskforge.run import load_run  # noqa: E402
+from taskforge.run import LoadedRun, load_run  # noqa: E402
+from taskforge.spec.errors import SpecError  # noqa: E402
+
+
+def object_run(checkpoint: Path, why_mpc: str) -> LoadedRun:
+    """The `algo: mpc` run at `checkpoint`, whose task appends `object - tool, goal - object` and
+    observes its goal; a one-line error (SystemExit) otherwise, or where there is no run, `why_mpc` saying why only an MPC
+    run will do. Shared with `mpc_push_probe.py`, which reads the object's motion the same way."""
+    try:
+        run = load_run(checkpoint)
+    except SpecError as exc:  # no policy there, or not a taskforge run: one line, not a traceback
+        sys.exit(f"error: {exc}")
+    if not isinstance(run.agent, MPCAgent):
+        sys.exit(f"error: {checkpoint}: not an algo: mpc run ({why_mpc})")
+    task, task_file, _ = run.phases[-1]
+    if not (task.observation.relative_positions and task.goals.observable):
+        sys.exit(f"error: {checkpoint}: its task ({task_file}) needs observation.relative_positions: true and "
+                 "goals.observable: true (the object's motion is read off `goal - object`)")
+    return run
 
 
 def relative_positions(checkpoint: Path) -> tuple[np.ndarray, np.ndarray, int]:
     """`object - tool, goal - object` before and after every transition of the run's buffer,
     oldest first, and the run's step. A one-line error (SystemExit) where the run cannot tell the
     object's motion."""
-    run = load_run(checkpoint)
-    if not isinstance(run.agent, MPCAgent):
-        sys.exit(f"error: {checkpoint}: not an algo: mpc run (only its buffer holds the data it collected)")
-    task, task_file, _ = run.phases[-1]
-    if not (task.observation.relative_positions and task.goals.observable):
-        sys.exit(f"error: {checkpoint}: its task ({task_file}) needs observation.relative_positions: true and "
-                 "goals.observable: true (the object's motion is read off `goal - object`)")
+    run = object_run(checkpoint, "only its buffer holds the data it collected")
     buffer = run.agent.buffer
     order = buffer.oldest_first()
     return buffer.obs[order, -6:].numpy(), buffer.next_obs[order, -6:].numpy(), run.agent.global_step

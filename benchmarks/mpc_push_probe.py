@@ -39,10 +39,10 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.common import print_table, write_result  # noqa: E402
+from benchmarks.mpc_data_probe import object_run  # noqa: E402
 from taskforge.agents import MPCAgent  # noqa: E402
 from taskforge.demos.policies import act_in_box, scripted_policy  # noqa: E402
 from taskforge.envs import make  # noqa: E402
-from taskforge.run import load_run  # noqa: E402
 
 OBJECT = slice(4, 7)  # Meta-World's puck position in the observation
 
@@ -138,12 +138,8 @@ def main() -> None:
 
     results, data = [], None
     for path in args.checkpoints:
-        run = load_run(path)
-        if not isinstance(run.agent, MPCAgent):
-            sys.exit(f"error: {path}: not an algo: mpc run")
-        task, task_file, stages = run.phases[-1]
-        if not (task.observation.relative_positions and task.goals.observable):
-            sys.exit(f"error: {path}: its task ({task_file}) needs observation.relative_positions: true and goals.observable: true")
+        run = object_run(path, "its model and planner are what this scores")
+        _, task_file, stages = run.phases[-1]
         if data is None:  # one set of scripted pushes for every run: the same states scored
             data = scripted_episodes(task_file, stages[-1], args.episodes)
         agent = run.agent

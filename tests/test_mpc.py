@@ -905,7 +905,8 @@ def test_the_push_probe_scores_meta_worlds_scripted_pushes_with_the_runs_own_mod
     """benchmarks/mpc_push_probe.py on a real push run warm-started from scripted pushes: it
     compares the model on exactly the scripted steps that moved the puck (counted here from the
     simulator, independently), finds hand-at-puck states before a goalward push and has the run's
-    scorer pick one of three sequences at each; a task without `goal - object` is a one-line error."""
+    scorer pick one of three sequences at each; a task without `goal - object`, or a folder with no
+    run, is a one-line error."""
     (tmp_path / "push").mkdir()
     checkpoint, _ = demos_run(tmp_path / "push", "tasks/metaworld/push.yaml", "push", episodes=2, planned_steps=400)
     monkeypatch.setattr(benchmarks.common, "RESULTS", tmp_path / "results")
@@ -924,6 +925,9 @@ def test_the_push_probe_scores_meta_worlds_scripted_pushes_with_the_runs_own_mod
     train(point, run_dir=tmp_path / "point", progress=False)
     monkeypatch.setattr("sys.argv", ["mpc_push_probe.py", str(tmp_path / "point/final.pt")])
     with pytest.raises(SystemExit, match="observation.relative_positions: true"):
+        mpc_push_probe.main()
+    monkeypatch.setattr("sys.argv", ["mpc_push_probe.py", str(tmp_path / "results")])  # a folder with no run in it
+    with pytest.raises(SystemExit, match="no final.pt or checkpoint.pt"):
         mpc_push_probe.main()
 
 
