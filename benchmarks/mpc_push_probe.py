@@ -41,8 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.common import print_table, write_result  # noqa: E402
 from benchmarks.mpc_data_probe import object_run  # noqa: E402
 from taskforge.agents import MPCAgent  # noqa: E402
-from taskforge.demos.policies import act_in_box, scripted_policy  # noqa: E402
-from taskforge.envs import make  # noqa: E402
+from taskforge.demos import generate  # noqa: E402
 
 OBJECT = slice(4, 7)  # Meta-World's puck position in the observation
 
@@ -57,23 +56,11 @@ class Episode:
 
 
 def scripted_episodes(task_file: str, stage: str, episodes: int) -> list[Episode]:
-    """Meta-World's push policy on the first `episodes` held-out goals (seeds 0, 1, ...)."""
-    out = []
-    for seed in range(episodes):
-        env = make(task_file, stage=stage, split="test", seed=seed)
-        obs, _ = env.reset(seed=seed)
-        policy = scripted_policy(env, stage)
-        policy.reset(env)
-        rows = []
-        done = False
-        while not done:
-            action = act_in_box(policy, env)
-            next_obs, _, terminated, truncated, _ = env.step(action)
-            rows.append((obs, action, next_obs))
-            obs, done = next_obs, terminated or truncated
-        env.close()
-        out.append(Episode(*(np.array(x, dtype=np.float32) for x in zip(*rows))))
-    return out
+    """Meta-World's push policy on the first `episodes` held-out goals (goal k resets with seed k),
+    recorded as demonstrations are (`taskforge.demos.generate`), failed episodes kept."""
+    demos = generate(task_file, stage, episodes, split="test", keep_failed=True)
+    ends = np.cumsum(demos.episode_lengths)[:-1]
+    return [Episode(*parts) for parts in zip(*(np.split(x, ends) for x in (demos.observations, demos.actions, demos.next_observations())))]
 
 
 def motion_agreement(agent: MPCAgent, data: list[Episode], moved: float) -> dict:
@@ -116,8 +103,8 @@ def planner_preference(agent: MPCAgent, states: list[tuple[np.ndarray, np.ndarra
             own = torch.cat([agent.to_unit(torch.as_tensor(first, device=agent.device)), shifted[0, :-1]])
             push = agent.to_unit(torch.as_tensor(script, device=agent.device))
             candidates = torch.stack([push, torch.zeros_like(push), own])[None]
-            score = agent._scorer(torch.as_tensor(obs[None], device=agent.device))
-            mean = torch.stack([score(candidates)[0] for _ in range(repeats)]).mean(0).cpu()
+            start = torch.as_tensor(obs[None], device=agent.device)
+            mean = torch.stack([agent.score(start, candidates)[0] for _ in range(repeats)]).mean(0).cpu()
         best[int(mean.argmax())] += 1
         margin.append(float(mean[0] - mean[1]))
     return {"states": len(states), "best_push": int(best[0]), "best_hold": int(best[1]), "best_own_plan": int(best[2]),

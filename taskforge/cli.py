@@ -198,7 +198,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.trial_episodes is not None and args.trial_episodes < 1:
         raise SpecError.single("--trial-episodes", "", f"expected at least 1 episode per trial (got {args.trial_episodes})")
     report = evaluate_run(args.run, split=args.split, trials=args.episodes, stages=args.stage, seed=args.seed,
-                          trial_episodes=args.trial_episodes, deterministic=not args.stochastic)
+                          trial_episodes=args.trial_episodes, deterministic=not args.stochastic,
+                          stop_on_success=args.stop_on_success)
     print(format_table(report))
     if args.out:
         save_json(report, Path(args.out))
@@ -337,6 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--stochastic", action="store_true",
                    help="sample actions from the policy (seeded by --seed) instead of taking its mean; an RL² "
                         "policy explores by sampling, as in Duan et al.'s meta-test")
+    p.add_argument("--stop-on-success", action="store_true",
+                   help="end each episode at its first success (the same success rate in fewer steps; what a "
+                        "curriculum's evaluation.stop_on_success does in training)")
     p.add_argument("--out", help="write the report as JSON here")
     p.set_defaults(func=cmd_eval)
 

@@ -4,6 +4,7 @@ the `.npz` files and `taskforge demos`."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -162,6 +163,19 @@ def test_record_drops_failed_episodes_unless_asked_and_files_round_trip(tmp_path
     assert back.metadata == demos.metadata
     for key, value in demos.arrays().items():
         np.testing.assert_array_equal(getattr(back, key), value)
+
+    # each step's next observation: the following step's, and at an episode's end the one the
+    # env returned after it, which replaying the second kept episode's actions reproduces
+    after, length = back.next_observations(), env.max_episode_steps
+    np.testing.assert_array_equal(after[: length - 1], back.observations[1:length])
+    env.reset(seed=2, options={"stage": "reach", "goal_index": 2})
+    for action in back.actions[length:]:
+        replayed = env.step(action)[0]
+    np.testing.assert_allclose(after[-1], replayed, atol=1e-6)
+    assert not np.allclose(after[length - 1], back.observations[length])  # not the next episode's start
+    older = save(dataclasses.replace(demos, final_observations=None), tmp_path / "older.npz")  # a file from before
+    with pytest.raises(ValueError, match="no final observations"):
+        load(older).next_observations()
     env.close()
 
 

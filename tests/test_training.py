@@ -221,6 +221,14 @@ def test_eval_writes_a_well_formed_report(tmp_path, capsys):
         assert row["mean_length"] == 100
     assert report["rows"][0]["success_rate"] == 1.0 and report["rows"][1]["success_rate"] == 0.0
 
+    # ending episodes at their first success: the same successes, the easy stage's episodes shorter
+    assert main(["eval", str(run), "--episodes", "3", "--stop-on-success", "--out", str(out)]) == 0
+    stopped = json.loads(out.read_text())
+    assert stopped["stop_on_success"] and not report["stop_on_success"]
+    assert [(r["successes"], r["episodes"]) for r in stopped["rows"]] == [(3, 3), (0, 3)]
+    easy, hard = stopped["rows"]
+    assert easy["mean_length"] < 100 and hard["mean_length"] == 100, (easy, hard)
+
 
 def test_stochastic_eval_is_seeded_and_leaves_the_agents_random_stream_alone(tmp_path, capsys):
     """`--stochastic` samples actions: the same seed gives the same report, another seed or the

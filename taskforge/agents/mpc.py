@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from functools import partial
 
 import numpy as np
 import torch
@@ -210,7 +211,7 @@ class MPCAgent:
                 warm = proposals[:, 0]
             else:
                 warm = self._previous_plans(state, episode_start, len(obs_t))
-            new = plan(self.mpc, self._scorer(obs_t), warm, self.plan_generator, proposals)
+            new = plan(self.mpc, partial(self.score, obs_t), warm, self.plan_generator, proposals)
         return self._to_env(new[:, 0]), shift(new)
 
     def prior_act(self, obs: np.ndarray) -> np.ndarray:
@@ -251,32 +252,32 @@ class MPCAgent:
             state = self.model.mean_prediction(*rows)[0].mean(dim=0)
         return torch.stack(steps, dim=1).reshape(envs, k, self.mpc.horizon, self.action_size)
 
-    def _scorer(self, obs: torch.Tensor) -> Callable[[torch.Tensor], torch.Tensor]:
-        """Predicted return of candidate sequences `[envs, n, horizon, action]` from `obs`
-        `[envs, obs]`: `particles` rollouts each, particle p through member p mod members for the
-        whole horizon (TS-inf), rewards discounted and summed, plus the discounted terminal
-        value of each particle's last state (`terminal_value`); the particles' mean, plus
-        `optimism` times their std."""
+    def score(self, obs: torch.Tensor, candidates: torch.Tensor) -> torch.Tensor:
+        """Predicted return `[envs, n]` of candidate sequences `[envs, n, horizon, action]` (in
+        [-1, 1]) from `obs` `[envs, obs]`: `particles` rollouts each, particle p through member
+        p mod members for the whole horizon (TS-inf), rewards discounted and summed, plus the
+        discounted terminal value of each particle's last state (`terminal_value`); the
+        particles' mean, plus `optimism` times their std.
+
+        Why public: what the planner prefers is the question when a run stalls; a probe scores
+        its own sequences (a scripted push, holding still) with exactly this
+        (`benchmarks/mpc_push_probe.py`)."""
         members, per_member = self.mpc.ensemble_size, self.mpc.particles // self.mpc.ensemble_size
-
-        def score(candidates: torch.Tensor) -> torch.Tensor:
-            envs, n, horizon, _ = candidates.shape
-            env_actions = self._scale(candidates)
-            # rows of one member: (env, candidate, particle) flattened; every member gets them all
-            actions = env_actions[:, :, None].expand(-1, -1, per_member, -1, -1).reshape(envs * n * per_member, horizon, -1)
-            state = obs[:, None, None].expand(-1, n, per_member, -1).reshape(1, envs * n * per_member, -1).expand(members, -1, -1)
-            total = torch.zeros((members, envs * n * per_member), device=self.device)
-            for t in range(horizon):
-                state, reward = self.model.sample(state, actions[None, :, t].expand(members, -1, -1), self.plan_generator)
-                total += self.mpc.discount**t * reward
-            if self.value is not None and self.value_started:
-                total += self.mpc.discount**horizon * self.value(state)
-            returns = total.reshape(members, envs, n, per_member).permute(1, 2, 0, 3).reshape(envs, n, members * per_member)
-            if self.mpc.optimism:  # optimism in the face of the members' disagreement (MPCSpec.optimism)
-                return returns.mean(dim=-1) + self.mpc.optimism * returns.std(dim=-1)
-            return returns.mean(dim=-1)
-
-        return score
+        envs, n, horizon, _ = candidates.shape
+        env_actions = self._scale(candidates)
+        # rows of one member: (env, candidate, particle) flattened; every member gets them all
+        actions = env_actions[:, :, None].expand(-1, -1, per_member, -1, -1).reshape(envs * n * per_member, horizon, -1)
+        state = obs[:, None, None].expand(-1, n, per_member, -1).reshape(1, envs * n * per_member, -1).expand(members, -1, -1)
+        total = torch.zeros((members, envs * n * per_member), device=self.device)
+        for t in range(horizon):
+            state, reward = self.model.sample(state, actions[None, :, t].expand(members, -1, -1), self.plan_generator)
+            total += self.mpc.discount**t * reward
+        if self.value is not None and self.value_started:
+            total += self.mpc.discount**horizon * self.value(state)
+        returns = total.reshape(members, envs, n, per_member).permute(1, 2, 0, 3).reshape(envs, n, members * per_member)
+        if self.mpc.optimism:  # optimism in the face of the members' disagreement (MPCSpec.optimism)
+            return returns.mean(dim=-1) + self.mpc.optimism * returns.std(dim=-1)
+        return returns.mean(dim=-1)
 
     def _scale(self, unit: torch.Tensor) -> torch.Tensor:
         """Actions planned in [-1, 1] onto the env's box."""

@@ -17,6 +17,7 @@ File layout (`np.savez_compressed`; `load` checks it):
 | `terminated`, `truncated` | `[N]` bool | how the episode ended (on its last step) |
 | `privileged` | `[N, p]` float32 | `info["privileged"]` before each action (an asymmetric critic's extra input); absent when not recorded |
 | `episode_lengths`, `episode_success`, `goal_indices` | `[E]` | per episode kept |
+| `final_observations` | `[E, obs]` float32 | agent observation after each episode's last step (absent in files recorded before it was kept) |
 | `metadata` | 0-d str | JSON: task file and name, stage, split, seed, policy, success rate, taskforge version, ... |
 """
 
@@ -36,6 +37,7 @@ from taskforge.spec import SpecError
 
 STEP_KEYS = ("observations", "actions", "rewards", "successes", "episode_starts", "terminated", "truncated")
 EPISODE_KEYS = ("episode_lengths", "episode_success", "goal_indices")
+OPTIONAL_KEYS = ("privileged", "final_observations")
 
 
 @dataclass
@@ -53,6 +55,7 @@ class Demos:
     episode_success: np.ndarray
     goal_indices: np.ndarray
     privileged: np.ndarray | None = None
+    final_observations: np.ndarray | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -65,9 +68,22 @@ class Demos:
 
     def arrays(self) -> dict[str, np.ndarray]:
         out = {k: getattr(self, k) for k in (*STEP_KEYS, *EPISODE_KEYS)}
-        if self.privileged is not None:
-            out["privileged"] = self.privileged
+        for key in OPTIONAL_KEYS:
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
         return out
+
+    def next_observations(self) -> np.ndarray:
+        """`[N, obs]`: the observation after each step (the next step's, or the episode's final one).
+
+        Why: a transition (s, a, s') is what a dynamics model is judged on; without the final
+        observation an episode's last step has no s' (`benchmarks/mpc_push_probe.py` scores a
+        model on every step a scripted push moved the puck, the last ones included)."""
+        if self.final_observations is None:
+            raise ValueError("these demos keep no final observations (recorded before they were kept); record them again")
+        after = np.roll(self.observations, -1, axis=0)
+        after[np.cumsum(self.episode_lengths) - 1] = self.final_observations
+        return after
 
 
 def record(
@@ -94,7 +110,7 @@ def record(
     policy = policy or scripted_policy(env, stage)
     num_goals = env.backend.num_goals(env.split)
     steps: dict[str, list] = {k: [] for k in (*STEP_KEYS, "privileged")}
-    kept: dict[str, list] = {k: [] for k in EPISODE_KEYS}
+    kept: dict[str, list] = {k: [] for k in (*EPISODE_KEYS, "final_observations")}
     successes = 0
     by_task: dict[str, list[bool]] = {}
     steps_run = 0  # failed episodes included: every step the expert took costs env time
@@ -131,6 +147,7 @@ def record(
             kept["episode_lengths"].append(length)
             kept["episode_success"].append(success)
             kept["goal_indices"].append(goal_index)
+            kept["final_observations"].append(obs)
         if bar is not None:
             bar.set_postfix_str(f"success {successes}/{k + 1} ({successes / (k + 1):.0%})", refresh=False)
             bar.update(1)
@@ -177,6 +194,7 @@ def record(
         episode_success=np.asarray(kept["episode_success"], dtype=bool),
         goal_indices=np.asarray(kept["goal_indices"], dtype=np.int64),
         privileged=privileged,
+        final_observations=np.asarray(kept["final_observations"], dtype=np.float32).reshape(-1, obs_dim),
         metadata=metadata,
     )
 
@@ -193,6 +211,8 @@ def concatenate(parts: list[Demos]) -> Demos:
     if len(blocks) == len(parts):
         width = max(b.shape[1] for b in blocks)
         privileged = np.concatenate([np.pad(b, ((0, 0), (0, width - b.shape[1]))) for b in blocks])
+    finals = [p.final_observations for p in parts]
+    final_observations = np.concatenate(finals) if all(f is not None for f in finals) else None  # type: ignore[arg-type]
     meta = [p.metadata for p in parts]
     run, ok = sum(m.get("episodes_run", p.num_episodes) for m, p in zip(meta, parts)), sum(m.get("successes", 0) for m in meta)
     by_task = {f"{m.get('task')}/{name}" if len(m.get("success_by_task", {})) > 1 else str(m.get("task")): rate
@@ -209,7 +229,7 @@ def concatenate(parts: list[Demos]) -> Demos:
         "success_by_task": by_task,
         "parts": meta,
     }
-    return Demos(**arrays, privileged=privileged, metadata=metadata)
+    return Demos(**arrays, privileged=privileged, final_observations=final_observations, metadata=metadata)
 
 
 def generate(
@@ -265,6 +285,7 @@ def load(path: str | Path) -> Demos:
     return Demos(
         **{k: arrays[k] for k in (*STEP_KEYS, *EPISODE_KEYS)},
         privileged=arrays.get("privileged"),
+        final_observations=arrays.get("final_observations"),
         metadata=json.loads(str(arrays["metadata"])),
     )
 

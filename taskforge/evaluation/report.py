@@ -19,10 +19,13 @@ def evaluate_run(
     seed: int = 0,
     trial_episodes: int | None = None,
     deterministic: bool = True,
+    stop_on_success: bool = False,
 ) -> dict[str, Any]:
     """Evaluate a run: `trials` trials per (task, stage), trial k on goal k of the split, each of
     `trial_episodes` episodes (default the agent's: K for RL², 1 for PPO), acting with the
-    policy's mean or (`deterministic` False) sampling from it."""
+    policy's mean or (`deterministic` False) sampling from it. `stop_on_success` ends each episode
+    at its first success, as training's evaluation does with `evaluation.stop_on_success`: the
+    same success rate in fewer steps, which matters where every step is a plan (`algo: mpc`)."""
     run = load_run(path)
     agent = run.agent
     k = trial_episodes or agent.spec.trial_episodes
@@ -32,7 +35,7 @@ def evaluate_run(
         sub_tasks = sub_task_names if len(sub_task_names) > 1 else [None]
         if names:
             rows += evaluate_rows(agent, task, task_file, [(stage, sub) for stage in names for sub in sub_tasks], split,
-                                  trials, k, seed=seed, deterministic=deterministic)
+                                  trials, k, seed=seed, deterministic=deterministic, stop_on_success=stop_on_success)
     if stages and not rows:
         known = sorted({s for _, _, phase_stages in run.phases for s in phase_stages})
         raise SpecError.single(run.checkpoint, "stage", f"none of {', '.join(stages)} is in this run; expected one of {', '.join(known)}")
@@ -44,6 +47,7 @@ def evaluate_run(
         "trials_per_row": trials,
         "trial_episodes": k,
         "actions": "mean" if deterministic else "sampled",
+        "stop_on_success": stop_on_success,
         "rows": [r.as_dict() for r in rows],
     }
 
