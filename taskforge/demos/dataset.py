@@ -284,8 +284,7 @@ def load(path: str | Path) -> Demos:
         raise SpecError.single(path, "", "holds no steps (every episode failed?); record it again, or with --keep-failed")
     return Demos(
         **{k: arrays[k] for k in (*STEP_KEYS, *EPISODE_KEYS)},
-        privileged=arrays.get("privileged"),
-        final_observations=arrays.get("final_observations"),
+        **{k: arrays.get(k) for k in OPTIONAL_KEYS},
         metadata=json.loads(str(arrays["metadata"])),
     )
 
