@@ -190,7 +190,8 @@ def main() -> None:
              "-" if r["ms_per_env_step"] is None else f"{r['ms_per_env_step']:.2f}"] for name, r in runs.items()]
     print_table(["run", "env steps", "held-out at the end", "best", "first at the goal", "ms per env step (train)"], rows)
     print(f"curves: {plot(runs, RESULTS / 'model_based.png')}")
-    write_result("model_based", {"advanced": [] if args.report_only else args.variants, "seeds_advanced": args.seeds,
+    write_result("model_based", {"advanced": [] if args.report_only else args.variants,
+                                 "seeds_advanced": [] if args.report_only else args.seeds,
                                  "budgets": {v: s.budget for v, s in VARIANTS.items()},
                                  "goals": {v: s.goal for v, s in VARIANTS.items() if s.goal is not None}, "runs": runs})
 
