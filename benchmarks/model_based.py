@@ -28,6 +28,8 @@ Variants (benchmarks/configs/, one file each) and the goals of issue 23:
   fit 1,000 steps (agents/mpc_policy_value_utd.yaml), `mpc-push-policy-value-long` that planning
   20 steps ahead instead of 10 (agents/mpc_policy_value_long.yaml),
   `mpc-push-policy-value-long-demos` that with 10 scripted pushes seeding the model's data;
+  `mpc-push-policy-value-long-demos-fresh` that trained on a fresh (puck, goal) pair every
+  episode instead of ML1's 50 training pairs (`goals.train.draw: fresh`);
 - `mpc-pick-place`: pick-place `place` from scratch, 1M; >= 0.80 within 1M (PPO from scratch:
   0.00 at 2M, benchmarks/pick_place_curriculum.py); `mpc-pick-place-native` the same in TD-MPC2's
   setting: Meta-World's own reward, no randomisation (configs/pick_place_native.yaml);
@@ -104,6 +106,7 @@ VARIANTS: dict[str, Variant] = {
     "mpc-push-policy-value-utd": Variant("push", "push", 200_000, 0.95),
     "mpc-push-policy-value-long": Variant("push", "push", 200_000, 0.95),
     "mpc-push-policy-value-long-demos": Variant("push", "push", 200_000, 0.95),
+    "mpc-push-policy-value-long-demos-fresh": Variant("push", "push", 200_000, 0.95),
     "ppo-push": Variant("push", "push", 200_000, None),
     "mpc-pick-place": Variant("pick-place", "place", 1_000_000, 0.80),
     "mpc-pick-place-native": Variant("pick-place", "place", 1_000_000, 0.80),

@@ -38,7 +38,8 @@ def task_summary(task: TaskSpec) -> list[str]:
     goals = "reset seeds" if b.type == "gymnasium" else f"goals {'observable' if task.goals.observable else 'hidden'}, seed {task.goals.seed},"
     lines = [
         f"task {task.name}: backend {b.type}, {source}, episodes of {task.max_episode_steps} steps",
-        f"  {goals} train {task.goals.train.count}, test (held out) {task.goals.test.count}",
+        f"  {goals} train {'fresh each task' if task.goals.train.draw == 'fresh' else task.goals.train.count}, "
+        f"test (held out) {task.goals.test.count}",
         *_regions(b),
         f"  stages ({len(task.stages)}):",
     ]

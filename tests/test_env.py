@@ -278,6 +278,61 @@ def test_random_object_start_is_independent_of_the_goal_repeated_within_a_trial_
     assert not np.allclose(objects, np.array([o for o, _ in starts("random", 1)]))
 
 
+FRESH_GOAL_TASKS = {
+    # task file: (goal region low, high in x, y; minimum horizontal object-goal distance)
+    TASKS / "metaworld" / "push.yaml": ((-0.1, 0.8), (0.1, 0.9), 0.15),
+    TASKS / "xarm7" / "pick_place.yaml": ((0.30, -0.25), (0.60, 0.25), 0.10),
+}
+
+
+@pytest.mark.parametrize("path", FRESH_GOAL_TASKS, ids=lambda p: f"{p.parent.name}/{p.stem}")
+def test_fresh_training_goals_are_new_each_task_seeded_and_leave_the_test_split_alone(path):
+    """`goals.train.draw: fresh` draws goal and object per task instance on the train split
+    (repeated by same_task, the same for the same seed); the test split keeps its fixed set."""
+    low, high, min_dist = FRESH_GOAL_TASKS[path]
+    doc = yaml.safe_load(path.read_text())
+    doc.pop("randomization", None)
+    stage = doc["stages"][0]["name"]
+
+    def tasks(draw: str, split: str, seed: int) -> np.ndarray:
+        doc["goals"] = {**doc.get("goals", {}), "train": {"count": 50, "draw": draw}}
+        env = env_from(doc, stage=stage, seed=seed, split=split)
+        out = []
+        for options in [{"goal_index": 3}, {"goal_index": 3}, {"same_task": True}, {"goal_index": 7}]:
+            env.reset(options=options)
+            f = env.features()
+            out.append(np.concatenate([f["object_pos"], f["goal_pos"]]))
+        env.close()
+        return np.array(out)
+
+    fixed = tasks("set", "train", 0)
+    fresh = tasks("fresh", "train", 0)
+    objects, goals = fresh[:, :3], fresh[:, 3:]
+    assert np.linalg.norm(fresh[0] - fresh[1]) > 1e-3 and np.linalg.norm(fresh[1] - fresh[3]) > 1e-3, "a new task each episode"
+    np.testing.assert_allclose(fresh[2], fresh[1], atol=1e-6)  # same_task repeats the drawn task
+    assert not any(np.allclose(g, fixed[0, 3:], atol=1e-3) or np.allclose(g, fixed[3, 3:], atol=1e-3) for g in goals)
+    assert np.all(goals[:, :2] >= np.array(low) - 1e-6) and np.all(goals[:, :2] <= np.array(high) + 1e-6)
+    assert np.all(np.linalg.norm(objects[:, :2] - goals[:, :2], axis=1) >= min_dist - 0.005)
+    np.testing.assert_array_equal(fresh, tasks("fresh", "train", 0))
+    assert not np.allclose(fresh, tasks("fresh", "train", 1))
+    np.testing.assert_array_equal(tasks("fresh", "test", 0), tasks("set", "test", 0))  # held-out goals unchanged
+
+
+def test_fresh_training_goals_on_xarm7_stay_in_the_train_cells():
+    """The checkerboard gap between train and held-out goals survives fresh draws."""
+    from taskforge.backends.xarm7_scene import fresh_train_entry, make_goal_sets
+    from taskforge.spec.backends import XArm7BackendSpec
+
+    spec = XArm7BackendSpec.model_validate(yaml.safe_load((TASKS / "xarm7" / "pick_place.yaml").read_text())["backend"])
+    _, test = make_goal_sets(spec, 0, 50, 50)
+    rng = np.random.default_rng(0)
+    fresh = np.array([fresh_train_entry(spec, rng).goals[0] for _ in range(200)])
+    cell = np.floor(fresh / spec.goal_split.cell).sum(axis=1).astype(int)
+    assert np.all(cell % 2 == 0), "every fresh goal in a train (even) cell"
+    gap = np.linalg.norm(fresh[:, None, :] - test.goals[None], axis=2).min()
+    assert gap >= 2 * spec.goal_split.margin - 1e-9
+
+
 def test_random_object_start_is_refused_where_there_is_no_object_to_place(tmp_path):
     from taskforge import load_task
 
@@ -291,6 +346,15 @@ def test_random_object_start_is_refused_where_there_is_no_object_to_place(tmp_pa
     doc["randomization"] = {"object_start": "anywhere"}
     path.write_text(yaml.safe_dump(doc))
     with pytest.raises(SpecError, match=r"randomization\.object_start.*goal_set.*random"):
+        load_task(path)
+    doc["randomization"] = {}
+    doc["goals"] = {"train": {"draw": "fresh"}}
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(SpecError, match=r"door\.yaml.*goals\.train\.draw.*door-open-v3.*expected 'set'"):
+        load_task(path)
+    doc["goals"] = {"test": {"draw": "fresh"}}  # held-out goals are always a fixed set
+    path.write_text(yaml.safe_dump(doc))
+    with pytest.raises(SpecError, match=r"goals\.test\.draw"):
         load_task(path)
 
 

@@ -50,8 +50,8 @@ def draw_starts_apart(
 
 
 def mujoco_only_issues(task: TaskSpec, file: str | Path, what: str) -> list[SpecIssue]:
-    """The randomisation a backend without MuJoCo or an object (`what`, e.g. 'a Gymnasium env')
-    cannot honour: physics terms and a random object start."""
+    """What a backend without MuJoCo or an object (`what`, e.g. 'a Gymnasium env') cannot
+    honour: physics terms, a random object start and fresh training goals."""
     issues = []
     if task.randomization.physics:
         msg = f"physics randomisation needs a MuJoCo backend (metaworld, xarm7); remove it for {what}"
@@ -59,6 +59,9 @@ def mujoco_only_issues(task: TaskSpec, file: str | Path, what: str) -> list[Spec
     if task.randomization.object_start != "goal_set":
         msg = f"{what} has no object to place; expected 'goal_set' (the default)"
         issues.append(SpecIssue(str(file), "randomization.object_start", msg))
+    if task.goals.train.draw != "set":
+        msg = f"{what} has no goal distribution to draw from; expected 'set' (the default)"
+        issues.append(SpecIssue(str(file), "goals.train.draw", msg))
     return issues
 
 
@@ -94,14 +97,17 @@ class Backend(Protocol):
 
     def reset(
         self, task_name: str, split: Split, goal_index: int, goal: GoalOverride,
-        object_rng: np.random.Generator | None = None,
+        task_rng: np.random.Generator | None = None,
     ) -> np.ndarray:
         """Reset to a goal of a split; returns the observation with the true goal in `goal_slice`.
 
-        `object_rng` None: the object starts where the goal entry puts it. A generator: the
-        object's start is drawn from it over the backend's object region, independently of the
-        goal (`randomization.object_start: random`); the env hands a generator seeded the same
-        way to repeat a placement. Backends without an object refuse that option in `check_task`.
+        `task_rng` None: goal entry `goal_index` of the split, the object where it puts it. A
+        generator: what the task draws per task instance comes from it — on the train split
+        with `goals.train.draw: fresh`, the goal and the object's start together (from the
+        distribution the split's set is drawn from; `goal_index` is then unused), otherwise,
+        with `randomization.object_start: random`, the object's start over the backend's object
+        region, independently of the goal. The env hands a generator seeded the same way to
+        repeat a task. Backends that cannot draw refuse those options in `check_task`.
         """
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, bool]:

@@ -54,7 +54,7 @@ class GymnasiumBackend:
 
     def reset(
         self, task_name: str, split: Split, goal_index: int, goal: GoalOverride,
-        object_rng: np.random.Generator | None = None,
+        task_rng: np.random.Generator | None = None,
     ) -> np.ndarray:
         seed = goal_index + (TEST_SEED_OFFSET if split == "test" else 0)
         obs, _ = self._env.reset(seed=seed)

@@ -72,7 +72,7 @@ class PointMassBackend:
 
     def reset(
         self, task_name: str, split: Split, goal_index: int, goal: GoalOverride,
-        object_rng: np.random.Generator | None = None,
+        task_rng: np.random.Generator | None = None,
     ) -> np.ndarray:
         # `distance_scale` pulls the goal towards the start (an easier first stage); the start
         # is the origin, so that is a scaling. `check_task` refuses a height override.

@@ -71,7 +71,9 @@ Goals and reset
   Each split is a fixed list of entries (cube start x, y; goal x, y, z above the table),
   generated from `goals.seed` (`xarm7_scene.make_goal_sets`); held-out test goals come from the
   other colour of a 3-D checkerboard over the goal region, at least 2 x `goal_split.margin` from
-  every train goal. Reset: arm at `home` (gripper open), cube at the entry's start resting on
+  every train goal; with `goals.train.draw: fresh` each training task instance draws its own
+  entry by the train split's rule (`xarm7_scene.fresh_train_entry`), so it keeps that gap.
+  Reset: arm at `home` (gripper open), cube at the entry's start resting on
   the table (its current, possibly randomised size; with `randomization.object_start: random`
   drawn afresh over `object_region`, at least `min_goal_distance` from the goal), goal at the
   entry's goal moved by the stage's goal override (exactly as Meta-World's backend:
@@ -100,8 +102,10 @@ from taskforge.backends.xarm7_scene import (
     OBJECT_JOINT,
     TCP_SITE,
     GoalRegionTooSmall,
+    GoalSet,
     build_ik_model,
     build_scene,
+    fresh_train_entry,
     home_qpos,
     load_robot,
     make_goal_sets,
@@ -141,6 +145,7 @@ class XArm7Backend:
         m = self._model = self.scene
         self._data = mujoco.MjData(m)
         self._train, self._test = make_goal_sets(spec, goals.seed, goals.train.count, goals.test.count)
+        self._fresh_train = goals.train.draw == "fresh"
 
         # Ids, resolved once.
         self._arm_qadr = np.array([m.jnt_qposadr[m.joint(j).id] for j in ARM_JOINTS])
@@ -197,7 +202,9 @@ class XArm7Backend:
 
     def goal_entry(self, split: Split, index: int) -> tuple[np.ndarray, np.ndarray]:
         """(cube start x, y; goal x, y, z in world coordinates) of an entry, before overrides."""
-        entries = self._train if split == "train" else self._test
+        return self._world_entry(self._train if split == "train" else self._test, index)
+
+    def _world_entry(self, entries: GoalSet, index: int) -> tuple[np.ndarray, np.ndarray]:
         goal = entries.goals[index].copy()
         goal[2] += self._table
         return entries.objects[index].copy(), goal
@@ -216,12 +223,15 @@ class XArm7Backend:
 
     def reset(
         self, task_name: str, split: Split, goal_index: int, goal: GoalOverride,
-        object_rng: np.random.Generator | None = None,
+        task_rng: np.random.Generator | None = None,
     ) -> np.ndarray:
         m, d = self._model, self._data
-        obj_xy, goal_pos = self.goal_entry(split, goal_index)
-        if object_rng is not None:
-            obj_xy = place_cubes(self.spec, goal_pos[None], object_rng)[0]
+        if split == "train" and self._fresh_train and task_rng is not None:
+            obj_xy, goal_pos = self._world_entry(fresh_train_entry(self.spec, task_rng), 0)
+        else:
+            obj_xy, goal_pos = self.goal_entry(split, goal_index)
+            if task_rng is not None:
+                obj_xy = place_cubes(self.spec, goal_pos[None], task_rng)[0]
         mujoco.mj_resetData(m, d)
         d.qpos[self._arm_qadr] = self._home
         d.ctrl[self._arm_act] = self._home

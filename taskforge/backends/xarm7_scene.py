@@ -204,6 +204,13 @@ def make_goal_sets(spec: XArm7BackendSpec, seed: int, n_train: int, n_test: int)
     return _split(spec, train_rng, 0, n_train), _split(spec, test_rng, 1, n_test)
 
 
+def fresh_train_entry(spec: XArm7BackendSpec, rng: np.random.Generator) -> GoalSet:
+    """One train entry drawn afresh from `rng` (`goals.train.draw: fresh`): a goal in the train
+    cells and its cube start, by the same rule as the train split's entries, so fresh goals
+    keep the checkerboard's gap to the held-out ones."""
+    return _split(spec, rng, 0, 1)
+
+
 def _split(spec: XArm7BackendSpec, rng: np.random.Generator, parity: int, count: int) -> GoalSet:
     region, split = spec.goal_region, spec.goal_split
     low = np.array([region.x[0], region.y[0], region.z[0]])

@@ -111,7 +111,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         self._backlash = ActionBacklash(rand.action_backlash, n_act)
         self._hide_goal = not task.goals.observable
         self._random_object = rand.object_start == "random"
-        self._object_seed = 0
+        self._fresh_train = task.goals.train.draw == "fresh"
+        self._task_seed = 0
 
         self.action_space = Box(-1.0, 1.0, (n_act,), np.float32)
         self.observation_space = Box(-np.inf, np.inf, (obs_size,), np.float32)
@@ -181,15 +182,18 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
         if goal_index is None:
             goal_index = int(rng.integers(self.backend.num_goals(self.split)))
 
+        # Whether this task instance draws something (an object start, a fresh training goal):
+        # the env then draws a seed per instance, and the backend its draws from that seed.
+        draws_task = self._random_object or (self._fresh_train and self.split == "train")
         randomizer = self._randomizers.get(name)
         if same_task:  # the model still holds the previous draw: the task includes its physics
             physics_draw = self._physics_draw
         else:
             physics_draw = randomizer.apply(rng) if randomizer else np.zeros(0)
-            if self._random_object:
-                # A seed, not a position: the backend owns its object region and the minimum
-                # distance to the goal; `same_task` hands it the same seed to repeat the start.
-                self._object_seed = int(rng.integers(2**63))
+            if draws_task:
+                # A seed, not a position: the backend owns its regions and the minimum distance
+                # between object and goal; `same_task` hands it the same seed to repeat the task.
+                self._task_seed = int(rng.integers(2**63))
         self._obs_noise.reset(rng)
         self._act_noise.reset(rng)
         self._latency.reset(rng)
@@ -197,8 +201,8 @@ class TaskEnv(gym.Env[np.ndarray, np.ndarray]):
 
         stage = self.stages[self.stage]
         goal = GoalOverride(stage.spec.goal.height, stage.spec.goal.distance_scale, stage.spec.goal.height_scale)
-        object_rng = np.random.default_rng(self._object_seed) if self._random_object else None
-        obs = self.backend.reset(name, self.split, goal_index, goal, object_rng)
+        task_rng = np.random.default_rng(self._task_seed) if draws_task else None
+        obs = self.backend.reset(name, self.split, goal_index, goal, task_rng)
         self._t = 0
         # `replay` is the curriculum's label for the episode, echoed back so a trainer can tell
         # which finished episodes were replays without tracking autoresets itself.
